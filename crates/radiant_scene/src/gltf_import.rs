@@ -1,0 +1,339 @@
+//! glTF 2.0 import with validation. Reads nodes (whole hierarchy), triangle primitives,
+//! materials (base colour × texture mean, emissive × KHR_materials_emissive_strength),
+//! KHR_lights_punctual lights and the first camera.
+
+use std::path::Path;
+
+use glam::{DMat4, DVec3, DVec4};
+use gltf::mesh::Mode;
+
+use crate::{Camera, Light, LightKind, Scene, SceneError, Surface, Triangle};
+
+/// Loads a `.gltf` (with external or embedded buffers) or `.glb` file.
+pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
+    let bytes = std::fs::read(path).map_err(|e| SceneError::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })?;
+    load(&bytes, path.parent())
+}
+
+/// Loads glTF or GLB from memory; buffers must be embedded (data URIs or the GLB chunk).
+pub fn load_gltf_slice(bytes: &[u8]) -> Result<Scene, SceneError> {
+    load(bytes, None)
+}
+
+fn load(bytes: &[u8], base: Option<&Path>) -> Result<Scene, SceneError> {
+    if bytes.iter().all(|b| b.is_ascii_whitespace()) {
+        return Err(SceneError::Empty);
+    }
+    let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| match e {
+        gltf::Error::Binary(b) => SceneError::Glb(b.to_string()),
+        gltf::Error::Validation(v) => SceneError::Invalid(
+            v.iter()
+                .take(3)
+                .map(|(path, err)| format!("{path}: {err}"))
+                .collect::<Vec<_>>()
+                .join("; "),
+        ),
+        gltf::Error::Deserialize(d) if bytes.starts_with(b"glTF") => SceneError::Glb(d.to_string()),
+        other => SceneError::NotGltf(other.to_string()),
+    })?;
+    let gltf::Gltf { document, blob } = gltf;
+    let buffers = gltf::import_buffers(&document, base, blob).map_err(|e| match e {
+        gltf::Error::ExternalReferenceInSliceImport => {
+            SceneError::Buffer("external buffer reference, but no directory to resolve it".into())
+        }
+        other => SceneError::Buffer(other.to_string()),
+    })?;
+    check_accessors(&document, &buffers)?;
+    // Images are only needed for base-colour texture means; a broken image is an error.
+    let needs_images = document
+        .materials()
+        .any(|m| m.pbr_metallic_roughness().base_color_texture().is_some());
+    let images = if needs_images {
+        gltf::import_images(&document, base, &buffers)
+            .map_err(|e| SceneError::Invalid(format!("image: {e}")))?
+    } else {
+        Vec::new()
+    };
+
+    let mut importer = Importer {
+        buffers: &buffers,
+        images: &images,
+        scene: Scene::default(),
+        material_surfaces: Vec::new(),
+    };
+    let roots: Vec<gltf::Node> = match document.default_scene().or_else(|| document.scenes().next()) {
+        Some(s) => s.nodes().collect(),
+        None => {
+            let mut is_child = vec![false; document.nodes().len()];
+            for n in document.nodes() {
+                for c in n.children() {
+                    is_child[c.index()] = true;
+                }
+            }
+            document.nodes().filter(|n| !is_child[n.index()]).collect()
+        }
+    };
+    // Iterative traversal with a depth guard: glTF forbids cycles, but do not trust input.
+    let mut stack: Vec<(gltf::Node, DMat4, usize)> =
+        roots.into_iter().map(|n| (n, DMat4::IDENTITY, 0)).collect();
+    while let Some((node, parent, depth)) = stack.pop() {
+        if depth > 256 {
+            return Err(SceneError::Invalid("node hierarchy deeper than 256 levels".into()));
+        }
+        let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
+        let world = parent * local;
+        let name = node
+            .name()
+            .map(str::to_string)
+            .unwrap_or_else(|| format!("node{}", node.index()));
+        if !world.is_finite() {
+            return Err(SceneError::NonFiniteTransform { node: name });
+        }
+        if let Some(mesh) = node.mesh() {
+            importer.mesh(&name, &mesh, world)?;
+        }
+        if let Some(light) = node.light() {
+            importer.light(&name, &light, world)?;
+        }
+        if let (Some(cam), None) = (node.camera(), importer.scene.camera) {
+            if let gltf::camera::Projection::Perspective(p) = cam.projection() {
+                let forward = world.transform_vector3(DVec3::NEG_Z).normalize_or_zero();
+                let up = world.transform_vector3(DVec3::Y).normalize_or_zero();
+                let yfov = f64::from(p.yfov());
+                if forward != DVec3::ZERO && up != DVec3::ZERO && yfov.is_finite() && yfov > 0.0 {
+                    importer.scene.camera = Some(Camera {
+                        position: world.transform_point3(DVec3::ZERO),
+                        forward,
+                        up,
+                        yfov,
+                    });
+                }
+            }
+        }
+        for child in node.children() {
+            stack.push((child, world, depth + 1));
+        }
+    }
+    Ok(importer.scene)
+}
+
+/// Every accessor must lie inside its buffer view, and every view inside its buffer, before any
+/// is read (the `gltf` reader would otherwise index out of bounds).
+fn check_accessors(doc: &gltf::Document, buffers: &[gltf::buffer::Data]) -> Result<(), SceneError> {
+    for acc in doc.accessors() {
+        let bad = || SceneError::AccessorOutOfBounds { accessor: acc.index() };
+        if acc.sparse().is_some() {
+            return Err(SceneError::Unsupported(format!("sparse accessor {}", acc.index())));
+        }
+        let Some(view) = acc.view() else { continue };
+        let buf = buffers.get(view.buffer().index()).ok_or_else(bad)?;
+        let view_end = view.offset().checked_add(view.length()).ok_or_else(bad)?;
+        if view_end > buf.len() {
+            return Err(bad());
+        }
+        let elem = acc.size();
+        let stride = view.stride().unwrap_or(elem);
+        if acc.count() == 0 {
+            continue;
+        }
+        let need = (acc.count() - 1)
+            .checked_mul(stride)
+            .and_then(|x| x.checked_add(elem))
+            .and_then(|x| x.checked_add(acc.offset()))
+            .ok_or_else(bad)?;
+        if need > view.length() {
+            return Err(bad());
+        }
+    }
+    Ok(())
+}
+
+struct Importer<'a> {
+    buffers: &'a [gltf::buffer::Data],
+    images: &'a [gltf::image::Data],
+    scene: Scene,
+    /// Cache of material index → (reflectance, emission, name).
+    material_surfaces: Vec<(Option<usize>, [f64; 3], [f64; 3], String)>,
+}
+
+impl Importer<'_> {
+    fn material(&mut self, m: &gltf::Material) -> Result<([f64; 3], [f64; 3], String), SceneError> {
+        if let Some(hit) = self.material_surfaces.iter().find(|c| c.0 == m.index()) {
+            return Ok((hit.1, hit.2, hit.3.clone()));
+        }
+        let name = m
+            .name()
+            .map(str::to_string)
+            .unwrap_or_else(|| match m.index() {
+                Some(i) => format!("material{i}"),
+                None => "default".to_string(),
+            });
+        let pbr = m.pbr_metallic_roughness();
+        let base = pbr.base_color_factor();
+        let mut rho = [base[0], base[1], base[2]].map(f64::from);
+        for &v in &rho {
+            if !v.is_finite() || !(0.0..=1.0).contains(&v) {
+                return Err(SceneError::ReflectanceOutOfRange { material: name, value: v });
+            }
+        }
+        if let Some(tex) = pbr.base_color_texture() {
+            let index = tex.texture().source().index();
+            if let Some(mean) = self.images.get(index).and_then(texture_mean) {
+                for (r, t) in rho.iter_mut().zip(mean) {
+                    *r *= t;
+                }
+            }
+        }
+        let strength = f64::from(m.emissive_strength().unwrap_or(1.0));
+        let ef = m.emissive_factor().map(f64::from);
+        let emission = ef.map(|e| e * strength);
+        for &v in ef.iter().chain([strength].iter()).chain(emission.iter()) {
+            if !v.is_finite() || v < 0.0 {
+                return Err(SceneError::InvalidEmission { material: name, value: v });
+            }
+        }
+        self.material_surfaces.push((m.index(), rho, emission, name.clone()));
+        Ok((rho, emission, name))
+    }
+
+    fn mesh(&mut self, node_name: &str, mesh: &gltf::Mesh, world: DMat4) -> Result<(), SceneError> {
+        let prims: Vec<_> = mesh.primitives().collect();
+        let flip = world.determinant() < 0.0;
+        for (k, prim) in prims.iter().enumerate() {
+            let name = if prims.len() > 1 {
+                format!("{node_name}#{k}")
+            } else {
+                node_name.to_string()
+            };
+            let mode = prim.mode();
+            if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+                self.scene.stats.skipped_primitives += 1;
+                continue;
+            }
+            let reader = prim.reader(|b| self.buffers.get(b.index()).map(|d| &d.0[..]));
+            let Some(positions) = reader.read_positions() else {
+                return Err(SceneError::Invalid(format!("mesh '{name}' has no POSITION")));
+            };
+            let mut verts = Vec::with_capacity(positions.len());
+            for (i, p) in positions.enumerate() {
+                let v = DVec3::new(p[0].into(), p[1].into(), p[2].into());
+                let w = world.transform_point3(v);
+                if !v.is_finite() || !w.is_finite() {
+                    return Err(SceneError::NonFinitePosition { mesh: name, vertex: i });
+                }
+                verts.push(w);
+            }
+            let indices: Vec<u32> = match reader.read_indices() {
+                Some(ix) => ix.into_u32().collect(),
+                None => (0..verts.len() as u32).collect(),
+            };
+            if let Some(&bad) = indices.iter().find(|&&i| i as usize >= verts.len()) {
+                return Err(SceneError::IndexOutOfRange { mesh: name, index: bad, count: verts.len() });
+            }
+            let tris: Vec<[u32; 3]> = match mode {
+                Mode::Triangles => indices.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+                Mode::TriangleStrip => (2..indices.len())
+                    .map(|i| {
+                        if i % 2 == 0 {
+                            [indices[i - 2], indices[i - 1], indices[i]]
+                        } else {
+                            [indices[i - 1], indices[i - 2], indices[i]]
+                        }
+                    })
+                    .collect(),
+                _ => (2..indices.len()).map(|i| [indices[0], indices[i - 1], indices[i]]).collect(),
+            };
+            let (reflectance, emission, material) = self.material(&prim.material())?;
+            let double_sided = prim.material().double_sided();
+            let surface = self.scene.surfaces.len() as u32;
+            self.scene.surfaces.push(Surface { name, material, reflectance, emission });
+            for [a, b, c] in tris {
+                let (a, b, c) = (verts[a as usize], verts[b as usize], verts[c as usize]);
+                let vertices = if flip { [a, c, b] } else { [a, b, c] };
+                let t = Triangle { vertices, surface };
+                if is_degenerate(&t) {
+                    self.scene.stats.degenerate_triangles += 1;
+                    continue;
+                }
+                self.scene.triangles.push(t);
+                if double_sided {
+                    let [a, b, c] = vertices;
+                    self.scene.triangles.push(Triangle { vertices: [a, c, b], surface });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn light(&mut self, node_name: &str, light: &gltf::khr_lights_punctual::Light, world: DMat4) -> Result<(), SceneError> {
+        use gltf::khr_lights_punctual::Kind;
+        let name = light.name().map(str::to_string).unwrap_or_else(|| node_name.to_string());
+        let intensity = f64::from(light.intensity());
+        let color = light.color().map(f64::from);
+        let bad = |what: String| SceneError::InvalidLight { light: name.clone(), what };
+        if !intensity.is_finite() || intensity < 0.0 {
+            return Err(bad(format!("intensity {intensity} is negative or not finite")));
+        }
+        if color.iter().any(|c| !c.is_finite() || *c < 0.0) {
+            return Err(bad("colour is negative or not finite".into()));
+        }
+        let range = light.range().map(f64::from);
+        if let Some(r) = range
+            && !(r.is_finite() && r > 0.0)
+        {
+            return Err(bad(format!("range {r} must be positive")));
+        }
+        let kind = match light.kind() {
+            Kind::Point => LightKind::Point,
+            Kind::Directional => LightKind::Directional,
+            Kind::Spot { inner_cone_angle, outer_cone_angle } => {
+                let (i, o) = (f64::from(inner_cone_angle), f64::from(outer_cone_angle));
+                if !(i.is_finite() && o.is_finite() && 0.0 <= i && i < o && o <= std::f64::consts::FRAC_PI_2) {
+                    return Err(bad(format!("spot cone angles {i}, {o} are not 0 <= inner < outer <= pi/2")));
+                }
+                LightKind::Spot { inner_cone_angle: i, outer_cone_angle: o }
+            }
+        };
+        let direction = world.transform_vector3(DVec3::NEG_Z).normalize_or_zero();
+        if direction == DVec3::ZERO {
+            return Err(bad("degenerate node transform".into()));
+        }
+        self.scene.lights.push(Light {
+            name,
+            kind,
+            position: world.transform_point3(DVec3::ZERO),
+            direction,
+            color,
+            intensity,
+            range,
+        });
+        Ok(())
+    }
+}
+
+/// Zero-area, collinear or needle triangles: area below 1e-12 of the squared longest edge.
+fn is_degenerate(t: &Triangle) -> bool {
+    let [a, b, c] = t.vertices;
+    let longest = (b - a).length_squared().max((c - b).length_squared()).max((a - c).length_squared());
+    let cross = t.cross().length();
+    !(cross > 1e-12 * longest) || !cross.is_finite()
+}
+
+/// Mean linear colour of an 8-bit sRGB texture; `None` for formats it does not read.
+fn texture_mean(img: &gltf::image::Data) -> Option<[f64; 3]> {
+    use gltf::image::Format;
+    let channels = match img.format {
+        Format::R8G8B8 => 3,
+        Format::R8G8B8A8 => 4,
+        _ => return None,
+    };
+    let lut: Vec<f64> = (0..256).map(|i| radiant_color::srgb_to_linear(i as f64 / 255.0)).collect();
+    let mut sum = DVec4::ZERO;
+    for px in img.pixels.chunks_exact(channels) {
+        sum += DVec4::new(lut[px[0] as usize], lut[px[1] as usize], lut[px[2] as usize], 1.0);
+    }
+    (sum.w > 0.0).then(|| [sum.x / sum.w, sum.y / sum.w, sum.z / sum.w])
+}

@@ -1,0 +1,274 @@
+//! Ray visibility for radiosity: closest-hit and segment (shadow) queries over a triangle soup.
+//!
+//! [`Bvh`] builds an `obvhs` BVH; [`BruteForce`] tests every triangle and is the reference the
+//! BVH is tested against. Both intersect triangles from either side, because a ray that hits the
+//! back of a wall is blocked just the same. Coordinates are `f32`: callers put the scene into a
+//! local frame of about unit size first (the radiosity crate does), so far-off origins and
+//! extreme scales lose no precision here.
+//!
+//! ```
+//! use glam::Vec3;
+//! use radiant_visibility::{Bvh, Visibility};
+//! let floor = [[Vec3::new(-1., 0., -1.), Vec3::new(1., 0., -1.), Vec3::new(0., 0., 1.)]];
+//! let bvh = Bvh::new(&floor);
+//! assert!(!bvh.segment_clear(Vec3::new(0., 1., 0.), Vec3::new(0., -1., 0.)));
+//! let hit = bvh.closest_hit(Vec3::new(0., 1., 0.), Vec3::NEG_Y, f32::INFINITY).unwrap();
+//! assert_eq!(hit.triangle, 0);
+//! assert!((hit.t - 1.0).abs() < 1e-6);
+//! ```
+
+use std::time::Duration;
+
+use glam::{Vec3, Vec3A};
+use obvhs::{BvhBuildParams, bvh2::Bvh2, ray::Ray};
+
+/// Fraction of a segment's length cut from each end, so that the surfaces at its end points do
+/// not block it.
+pub const SEGMENT_EPSILON: f32 = 1e-4;
+
+/// A ray hit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Index of the triangle, in the order given to the constructor.
+    pub triangle: u32,
+    /// Distance along the ray, in units of the direction's length.
+    pub t: f32,
+    /// Barycentric weight of vertex 1.
+    pub u: f32,
+    /// Barycentric weight of vertex 2 (vertex 0 has `1 - u - v`).
+    pub v: f32,
+    /// Whether the ray hit the triangle's front (counter-clockwise) side.
+    pub front: bool,
+}
+
+/// Visibility queries over a fixed set of triangles.
+pub trait Visibility: Send + Sync {
+    /// Whether the segment from `a` to `b` is unblocked, ignoring [`SEGMENT_EPSILON`] at each end.
+    fn segment_clear(&self, a: Vec3, b: Vec3) -> bool;
+    /// The closest hit of the ray `origin + t * dir` for `t` in `(tmin, tmax]`, tmin a tiny
+    /// relative offset.
+    fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit>;
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Tri {
+    v0: Vec3A,
+    e1: Vec3A,
+    e2: Vec3A,
+}
+
+impl Tri {
+    fn new(t: &[Vec3; 3]) -> Self {
+        let v0 = Vec3A::from(t[0]);
+        Tri { v0, e1: Vec3A::from(t[1]) - v0, e2: Vec3A::from(t[2]) - v0 }
+    }
+
+    /// Möller–Trumbore, two-sided. Returns (t, u, v, front) for `t` in `[tmin, tmax]`.
+    #[inline(always)]
+    fn intersect(&self, o: Vec3A, d: Vec3A, tmin: f32, tmax: f32) -> Option<(f32, f32, f32, bool)> {
+        let p = d.cross(self.e2);
+        let det = self.e1.dot(p);
+        if det.abs() < f32::MIN_POSITIVE || !det.is_finite() {
+            return None;
+        }
+        let inv = 1.0 / det;
+        let s = o - self.v0;
+        let u = s.dot(p) * inv;
+        if !(0.0..=1.0).contains(&u) {
+            return None;
+        }
+        let q = s.cross(self.e1);
+        let v = d.dot(q) * inv;
+        if v < 0.0 || u + v > 1.0 {
+            return None;
+        }
+        let t = self.e2.dot(q) * inv;
+        (t >= tmin && t <= tmax).then_some((t, u, v, det < 0.0))
+    }
+}
+
+fn ray_tmin(dir: Vec3) -> f32 {
+    // A tiny offset relative to the direction's length.
+    1e-6 / dir.length().max(f32::MIN_POSITIVE) * 1e-1
+}
+
+/// Tests every triangle; O(n) per query. The reference for [`Bvh`].
+#[derive(Clone, Debug)]
+pub struct BruteForce {
+    tris: Vec<Tri>,
+}
+
+impl BruteForce {
+    /// Takes the triangles' vertices.
+    pub fn new(triangles: &[[Vec3; 3]]) -> Self {
+        BruteForce { tris: triangles.iter().map(Tri::new).collect() }
+    }
+}
+
+impl Visibility for BruteForce {
+    fn segment_clear(&self, a: Vec3, b: Vec3) -> bool {
+        let (o, d) = (Vec3A::from(a), Vec3A::from(b - a));
+        !self
+            .tris
+            .iter()
+            .any(|t| t.intersect(o, d, SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON).is_some())
+    }
+
+    fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit> {
+        let (o, d) = (Vec3A::from(origin), Vec3A::from(dir));
+        let tmin = ray_tmin(dir);
+        let mut best: Option<Hit> = None;
+        for (i, tri) in self.tris.iter().enumerate() {
+            let limit = best.map_or(tmax, |b| b.t);
+            if let Some((t, u, v, front)) = tri.intersect(o, d, tmin, limit) {
+                best = Some(Hit { triangle: i as u32, t, u, v, front });
+            }
+        }
+        best
+    }
+}
+
+/// A BVH over the triangles, built with `obvhs` (PLOC, medium preset).
+pub struct Bvh {
+    bvh: Bvh2,
+    /// Triangles in BVH order.
+    tris: Vec<Tri>,
+    /// BVH order → caller's index.
+    ids: Vec<u32>,
+}
+
+impl Bvh {
+    /// Builds the BVH. An empty input gives a BVH that never hits.
+    pub fn new(triangles: &[[Vec3; 3]]) -> Self {
+        if triangles.is_empty() {
+            return Bvh { bvh: Bvh2::default(), tris: Vec::new(), ids: Vec::new() };
+        }
+        let obvhs_tris: Vec<obvhs::triangle::Triangle> = triangles
+            .iter()
+            .map(|t| obvhs::triangle::Triangle {
+                v0: t[0].into(),
+                v1: t[1].into(),
+                v2: t[2].into(),
+            })
+            .collect();
+        let bvh = obvhs::bvh2::builder::build_bvh2_from_tris(
+            &obvhs_tris,
+            BvhBuildParams::medium_build(),
+            &mut Duration::default(),
+        );
+        let ids = bvh.primitive_indices.clone();
+        let tris = ids.iter().map(|&i| Tri::new(&triangles[i as usize])).collect();
+        Bvh { bvh, tris, ids }
+    }
+}
+
+impl Visibility for Bvh {
+    fn segment_clear(&self, a: Vec3, b: Vec3) -> bool {
+        if self.tris.is_empty() {
+            return true;
+        }
+        let (o, d) = (Vec3A::from(a), Vec3A::from(b - a));
+        let ray = Ray::new(o, d, SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON);
+        self.bvh.ray_traverse_miss(ray, |r, id| {
+            self.tris[id]
+                .intersect(r.origin, r.direction, r.tmin, r.tmax)
+                .map_or(f32::INFINITY, |h| h.0)
+        })
+    }
+
+    fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit> {
+        if self.tris.is_empty() {
+            return None;
+        }
+        let (o, d) = (Vec3A::from(origin), Vec3A::from(dir));
+        let ray = Ray::new(o, d, ray_tmin(dir), tmax);
+        let mut hit = obvhs::ray::RayHit::none();
+        let mut best: Option<(f32, f32, f32, bool, usize)> = None;
+        self.bvh.ray_traverse(ray, &mut hit, |r, id| match self.tris[id].intersect(r.origin, r.direction, r.tmin, r.tmax) {
+            Some((t, u, v, front)) => {
+                if best.is_none_or(|b| t < b.0) {
+                    best = Some((t, u, v, front, id));
+                }
+                t
+            }
+            None => f32::INFINITY,
+        });
+        best.map(|(t, u, v, front, id)| Hit { triangle: self.ids[id], t, u, v, front })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A seeded xorshift generator, so the test is the same on every run.
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> f32 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            (self.0 >> 40) as f32 / (1u64 << 24) as f32
+        }
+        fn v(&mut self) -> Vec3 {
+            Vec3::new(self.next(), self.next(), self.next()) * 2.0 - 1.0
+        }
+    }
+
+    fn soup(rng: &mut Rng, n: usize) -> Vec<[Vec3; 3]> {
+        (0..n)
+            .map(|_| {
+                let c = rng.v();
+                [c + rng.v() * 0.2, c + rng.v() * 0.2, c + rng.v() * 0.2]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn bvh_agrees_with_brute_force() {
+        let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+        let tris = soup(&mut rng, 500);
+        let (bvh, brute) = (Bvh::new(&tris), BruteForce::new(&tris));
+        let mut hits = 0;
+        for _ in 0..5000 {
+            let (a, b) = (rng.v() * 1.5, rng.v() * 1.5);
+            assert_eq!(bvh.segment_clear(a, b), brute.segment_clear(a, b), "segment {a} {b}");
+            let (h1, h2) = (bvh.closest_hit(a, b - a, f32::INFINITY), brute.closest_hit(a, b - a, f32::INFINITY));
+            match (h1, h2) {
+                (Some(x), Some(y)) => {
+                    hits += 1;
+                    assert!((x.t - y.t).abs() < 1e-5, "{x:?} {y:?}");
+                    if x.triangle != y.triangle {
+                        // Only ties may differ.
+                        assert!((x.t - y.t).abs() < 1e-6);
+                    }
+                }
+                (None, None) => {}
+                other => panic!("bvh and brute force disagree: {other:?}"),
+            }
+        }
+        assert!(hits > 1000, "the test must exercise hits ({hits})");
+    }
+
+    #[test]
+    fn both_sides_block_and_ends_do_not() {
+        let tri = [[Vec3::new(-1., 0., -1.), Vec3::new(1., 0., -1.), Vec3::new(0., 0., 1.)]];
+        for vis in [&Bvh::new(&tri) as &dyn Visibility, &BruteForce::new(&tri)] {
+            assert!(!vis.segment_clear(Vec3::Y, -Vec3::Y));
+            assert!(!vis.segment_clear(-Vec3::Y, Vec3::Y));
+            // A segment that starts or ends on the triangle is not blocked by it.
+            assert!(vis.segment_clear(Vec3::ZERO, Vec3::Y));
+            assert!(vis.segment_clear(Vec3::Y, Vec3::ZERO));
+            let front = vis.closest_hit(Vec3::Y, -Vec3::Y, 10.0).expect("hit");
+            let back = vis.closest_hit(-Vec3::Y, Vec3::Y, 10.0).expect("hit");
+            assert!(front.front && !back.front);
+        }
+    }
+
+    #[test]
+    fn empty_scene_never_hits() {
+        let bvh = Bvh::new(&[]);
+        assert!(bvh.segment_clear(Vec3::ZERO, Vec3::ONE));
+        assert!(bvh.closest_hit(Vec3::ZERO, Vec3::ONE, 1.0).is_none());
+    }
+}
