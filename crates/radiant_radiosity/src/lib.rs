@@ -1,1 +1,86 @@
-//! x
+//! Finite-element radiosity on the CPU: meshing, form factors, hierarchical links, solvers,
+//! error metrics and light maps. No GPU, no ECS.
+//!
+//! The conventions (see `ARCHITECTURE.md`): `F_ij` is the fraction of the energy leaving element
+//! `i`… gathered at `i` from `j`, in the form `B_i = S_i + ρ_i Σ_j F_ij B_j`, with radiosity in
+//! glTF emissive units (a lone emitter of emissive 1 outputs 1).
+//!
+//! ```
+//! use radiant_radiosity::{Bake, BakeParams};
+//! let scene = radiant_scene::builtin("cornell-box").unwrap();
+//! let mut params = BakeParams::default();
+//! params.mesh.patch_size = 0.2; // coarse, for the example
+//! let result = Bake::new(&scene, &params).unwrap().run_to_end(&mut |_| {}).unwrap();
+//! let floor = result.surfaces.iter().find(|s| s.name == "floor").unwrap();
+//! assert!(floor.mean[0] > 0.05 && floor.mean[0] < 0.3);
+//! ```
+
+pub mod bake;
+pub mod form_factors;
+pub mod lightmap;
+pub mod lights;
+pub mod links;
+pub mod mesh;
+pub mod metrics;
+pub mod rng;
+pub mod scenes;
+pub mod solvers;
+pub mod system;
+
+pub use bake::{Bake, BakeEvent, BakeParams, BakeReport, BakeResult, PhaseTimes, TimelinePoint};
+pub use form_factors::{FormFactorKind, FormFactorParams};
+pub use links::LinkParams;
+pub use mesh::{Mesh, MeshParams};
+pub use solvers::{Progress, Solver, SolverKind, SolverParams};
+pub use system::{Rgb, System};
+
+/// Errors from baking. Each says what to change.
+#[derive(Debug, thiserror::Error)]
+pub enum BakeError {
+    /// The scene cannot be baked as given.
+    #[error("invalid scene: {0}")]
+    InvalidScene(String),
+    /// A material value is out of range.
+    #[error("surface '{surface}': {what}")]
+    InvalidMaterial {
+        /// The surface name.
+        surface: String,
+        /// What is wrong.
+        what: String,
+    },
+    /// A parameter is out of range.
+    #[error("invalid parameter: {0}")]
+    InvalidParameter(String),
+    /// The patch size would create too many elements.
+    #[error("{elements} elements exceed the limit of {limit}: use a larger --patch-size")]
+    TooManyElements {
+        /// Elements the patch size would create.
+        elements: usize,
+        /// The limit.
+        limit: usize,
+    },
+    /// The direct solver's dense matrix would be too large.
+    #[error("the direct solver is limited to {limit} elements ({elements} here): use an iterative method or a larger --patch-size")]
+    TooLargeForDirect {
+        /// Elements in the system.
+        elements: usize,
+        /// The limit.
+        limit: usize,
+    },
+    /// The system has no unique solution (reflectance 1 in a closed scene).
+    #[error("the radiosity system is singular (reflectance 1 in a closed scene?)")]
+    Singular,
+    /// A reference file could not be used.
+    #[error("reference: {0}")]
+    Reference(String),
+}
+
+#[cfg(test)]
+pub(crate) mod testing {
+    use glam::DVec3;
+
+    /// The unit cube's 12 triangles, facing inward.
+    pub fn unit_cube_inward() -> Vec<[DVec3; 3]> {
+        crate::scenes::box_triangles(DVec3::ZERO, DVec3::ONE, true)
+    }
+}

@@ -83,7 +83,8 @@ impl Tri {
             return None;
         }
         let t = self.e2.dot(q) * inv;
-        (t >= tmin && t <= tmax).then_some((t, u, v, det < 0.0))
+        // det = -d·N: positive when the ray meets the front (counter-clockwise) side.
+        (t >= tmin && t <= tmax).then_some((t, u, v, det > 0.0))
     }
 }
 
@@ -259,8 +260,9 @@ mod tests {
             // A segment that starts or ends on the triangle is not blocked by it.
             assert!(vis.segment_clear(Vec3::ZERO, Vec3::Y));
             assert!(vis.segment_clear(Vec3::Y, Vec3::ZERO));
-            let front = vis.closest_hit(Vec3::Y, -Vec3::Y, 10.0).expect("hit");
-            let back = vis.closest_hit(-Vec3::Y, Vec3::Y, 10.0).expect("hit");
+            // The triangle's front normal is -y.
+            let front = vis.closest_hit(-Vec3::Y, Vec3::Y, 10.0).expect("hit");
+            let back = vis.closest_hit(Vec3::Y, -Vec3::Y, 10.0).expect("hit");
             assert!(front.front && !back.front);
         }
     }

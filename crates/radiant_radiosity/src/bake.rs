@@ -1,0 +1,380 @@
+//! A bake: mesh the scene, build visibility, light it directly, build links, then solve in
+//! time-budgeted steps while recording the residual against time.
+
+use std::time::{Duration, Instant};
+
+use radiant_scene::{Scene, Surface};
+use radiant_visibility::{Bvh, Visibility};
+
+use crate::form_factors::{self, FfContext, FormFactorKind, FormFactorParams};
+use crate::links::{self, LinkParams};
+use crate::mesh::{Mesh, MeshParams};
+use crate::metrics::{SurfaceMean, surface_means};
+use crate::solvers::{Progress, Solver, SolverKind, SolverParams, new_solver};
+use crate::system::{Rgb, System};
+use crate::{BakeError, lights};
+
+/// Everything a bake can be told. `Default` gives the settings the accuracy tests hold to.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BakeParams {
+    /// Meshing (patch size, element levels).
+    pub mesh: MeshParams,
+    /// The form-factor method (default: analytic).
+    pub form_factors: FormFactorKind,
+    /// Form-factor parameters (hemicube resolution, ray counts, seed).
+    pub ff: FormFactorParams,
+    /// Link refinement.
+    pub links: LinkParams,
+    /// The solver (default: Gauss–Seidel).
+    pub solver: SolverKind,
+    /// Solver parameters (tolerance etc.).
+    pub solver_params: SolverParams,
+    /// Stop solving after this long, converged or not (default: none).
+    pub time_limit: Option<Duration>,
+    /// Length of one solver step between progress reports (default: 25 ms).
+    pub step_budget: Duration,
+}
+
+impl Default for BakeParams {
+    fn default() -> Self {
+        BakeParams {
+            mesh: MeshParams::default(),
+            form_factors: FormFactorKind::Analytic,
+            ff: FormFactorParams::default(),
+            links: LinkParams::default(),
+            solver: SolverKind::GaussSeidel,
+            solver_params: SolverParams::default(),
+            time_limit: None,
+            step_budget: Duration::from_millis(25),
+        }
+    }
+}
+
+/// Seconds spent in each phase.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PhaseTimes {
+    /// Meshing.
+    pub meshing: f64,
+    /// BVH build.
+    pub visibility: f64,
+    /// Direct light from punctual lights.
+    pub direct_light: f64,
+    /// Link refinement and form factors.
+    pub form_factors: f64,
+    /// Solving.
+    pub solve: f64,
+}
+
+/// One point of the convergence timeline.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TimelinePoint {
+    /// Seconds since the bake started (meshing included).
+    pub t_s: f64,
+    /// Iterations or shots so far.
+    pub iterations: u64,
+    /// Relative residual.
+    pub residual: f64,
+    /// Unshot energy fraction.
+    pub unshot_fraction: f64,
+}
+
+/// What a bake reports.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BakeReport {
+    /// Patches (nodes at the patch size).
+    pub patches: usize,
+    /// Elements (leaves).
+    pub elements: usize,
+    /// Links.
+    pub links: usize,
+    /// Bytes held by the links.
+    pub link_bytes: usize,
+    /// The solver.
+    pub solver: SolverKind,
+    /// The form-factor method.
+    pub form_factors: FormFactorKind,
+    /// Seconds per phase.
+    pub times: PhaseTimes,
+    /// Iterations or shots.
+    pub iterations: u64,
+    /// Whether the tolerance was met.
+    pub converged: bool,
+    /// Final relative residual.
+    pub residual: f64,
+    /// Final unshot fraction.
+    pub unshot_fraction: f64,
+    /// The timeline.
+    pub timeline: Vec<TimelinePoint>,
+    /// Warnings (skipped input, no emitters, …).
+    pub warnings: Vec<String>,
+    /// Whether anything emits.
+    pub has_emitters: bool,
+}
+
+/// Progress callbacks.
+#[derive(Debug)]
+pub enum BakeEvent<'a> {
+    /// A solver step finished.
+    Solve(&'a Progress, f64),
+}
+
+/// The outcome of a bake.
+pub struct BakeResult {
+    /// The element hierarchy.
+    pub mesh: Mesh,
+    /// The system that was solved.
+    pub system: System,
+    /// Radiosity per element (emissive units).
+    pub radiosity: Vec<Rgb>,
+    /// Area-weighted mean radiosity per surface.
+    pub surfaces: Vec<SurfaceMean>,
+    /// The report.
+    pub report: BakeReport,
+}
+
+/// A bake in progress.
+pub struct Bake {
+    /// The element hierarchy.
+    pub mesh: Mesh,
+    /// The system.
+    pub system: System,
+    /// The parameters.
+    pub params: BakeParams,
+    /// The scene's surfaces.
+    pub surfaces: Vec<Surface>,
+    times: PhaseTimes,
+    warnings: Vec<String>,
+    has_emitters: bool,
+    solver: Box<dyn Solver>,
+    started: Instant,
+    solving: Duration,
+    timeline: Vec<TimelinePoint>,
+    last: Option<Progress>,
+}
+
+fn validate(scene: &Scene) -> Result<(), BakeError> {
+    for s in &scene.surfaces {
+        let bad = |what: String| BakeError::InvalidMaterial { surface: s.name.clone(), what };
+        if s.reflectance.iter().any(|r| !r.is_finite() || !(0.0..=1.0).contains(r)) {
+            return Err(bad(format!("reflectance {:?} is outside [0, 1]", s.reflectance)));
+        }
+        if s.emission.iter().any(|e| !e.is_finite() || *e < 0.0) {
+            return Err(bad(format!("emission {:?} is negative or not finite", s.emission)));
+        }
+    }
+    if scene.triangles.iter().any(|t| t.surface as usize >= scene.surfaces.len()) {
+        return Err(BakeError::InvalidScene("a triangle names a surface that does not exist".into()));
+    }
+    Ok(())
+}
+
+impl Bake {
+    /// Prepares a bake: everything up to the solve.
+    pub fn new(scene: &Scene, params: &BakeParams) -> Result<Bake, BakeError> {
+        Self::with_progress(scene, params, &|_, _| {})
+    }
+
+    /// As [`Bake::new`], calling `progress(done, total)` while form factors are computed.
+    pub fn with_progress(scene: &Scene, params: &BakeParams, progress: &(dyn Fn(usize, usize) + Sync)) -> Result<Bake, BakeError> {
+        let started = Instant::now();
+        validate(scene)?;
+        let p = &params.solver_params;
+        if !(p.tolerance.is_finite() && p.tolerance > 0.0) {
+            return Err(BakeError::InvalidParameter(format!("tolerance {} must be positive", p.tolerance)));
+        }
+        if !(params.links.refinement.is_finite() && params.links.refinement > 0.0) {
+            return Err(BakeError::InvalidParameter("refinement must be positive".into()));
+        }
+        let mut times = PhaseTimes::default();
+        let mut t = Instant::now();
+        let mut lap = |slot: &mut f64| {
+            *slot = t.elapsed().as_secs_f64();
+            t = Instant::now();
+        };
+        let mesh = Mesh::new(scene, &params.mesh)?;
+        lap(&mut times.meshing);
+        let bvh = Bvh::new(&mesh.root_triangles_f32());
+        lap(&mut times.visibility);
+
+        let n = mesh.element_count();
+        let mut rho = Vec::with_capacity(n);
+        let mut source = Vec::with_capacity(n);
+        for &id in &mesh.leaves {
+            let s = &scene.surfaces[mesh.root_surface[mesh.nodes[id as usize].root as usize] as usize];
+            rho.push(s.reflectance);
+            source.push(s.emission);
+        }
+        if !scene.lights.is_empty() {
+            let direct = lights::direct_irradiance(&mesh, &scene.lights, &bvh);
+            for i in 0..n {
+                for c in 0..3 {
+                    source[i][c] += rho[i][c] * direct[i][c] / std::f64::consts::PI;
+                }
+            }
+        }
+        lap(&mut times.direct_light);
+
+        let mut warnings = scene.warnings();
+        let has_emitters = source.iter().any(|s| s.iter().any(|&v| v > 0.0));
+        let links = if has_emitters {
+            let (bhat, amb) = estimates(&mesh, &rho, &source);
+            let ctx = FfContext { mesh: &mesh, vis: &bvh, params: params.ff };
+            let method = form_factors::method(params.form_factors);
+            links::build(&ctx, method, &bhat, amb, &params.links, &|d| progress(d, n))
+        } else {
+            warnings.push("no emitters and no lights: nothing to bake, all radiosity is 0".into());
+            links::Links { row: vec![0; n + 1], ..Default::default() }
+        };
+        lap(&mut times.form_factors);
+        let dead = if has_emitters { enclosed_elements(&mesh, &bvh, params.ff.seed) } else { vec![false; n] };
+        let dead_count = dead.iter().filter(|&&d| d).count();
+        if dead_count > 0 {
+            tracing::debug!("{dead_count} elements lie inside closed geometry");
+        }
+        let system = System::new(&mesh, rho, source, links, &dead);
+        let solver = new_solver(params.solver, &system, params.solver_params);
+        Ok(Bake {
+            mesh,
+            system,
+            params: *params,
+            surfaces: scene.surfaces.clone(),
+            times,
+            warnings,
+            has_emitters,
+            solver,
+            started,
+            solving: Duration::ZERO,
+            timeline: Vec::new(),
+            last: None,
+        })
+    }
+
+    /// Runs the solver for about `budget` and records a timeline point.
+    pub fn step(&mut self, budget: Duration) -> Result<Progress, BakeError> {
+        let t = Instant::now();
+        let p = if self.has_emitters {
+            self.solver.step(&self.system, budget)?
+        } else {
+            Progress { iterations: 0, residual: 0.0, unshot_fraction: 0.0, converged: true }
+        };
+        self.solving += t.elapsed();
+        self.timeline.push(TimelinePoint {
+            t_s: self.started.elapsed().as_secs_f64(),
+            iterations: p.iterations,
+            residual: p.residual,
+            unshot_fraction: p.unshot_fraction,
+        });
+        self.last = Some(p);
+        Ok(p)
+    }
+
+    /// Seconds since the bake started.
+    pub fn elapsed(&self) -> f64 {
+        self.started.elapsed().as_secs_f64()
+    }
+
+    /// The latest progress.
+    pub fn last_progress(&self) -> Option<Progress> {
+        self.last
+    }
+
+    /// The current radiosity per element.
+    pub fn radiosity(&self) -> Vec<Rgb> {
+        if self.has_emitters { self.solver.radiosity(&self.system) } else { vec![[0.0; 3]; self.system.len()] }
+    }
+
+    /// Steps until converged or the time limit, calling `on_event` after each step.
+    pub fn run_to_end(mut self, on_event: &mut dyn FnMut(BakeEvent)) -> Result<BakeResult, BakeError> {
+        loop {
+            let p = self.step(self.params.step_budget)?;
+            on_event(BakeEvent::Solve(&p, self.elapsed()));
+            let out_of_time = self.params.time_limit.is_some_and(|l| self.started.elapsed() >= l);
+            if p.converged || out_of_time || !p.residual.is_finite() {
+                break;
+            }
+        }
+        Ok(self.finish())
+    }
+
+    /// The report as things stand.
+    pub fn report(&self) -> BakeReport {
+        let last = self.last.unwrap_or(Progress { iterations: 0, residual: f64::INFINITY, unshot_fraction: 1.0, converged: false });
+        let mut times = self.times;
+        times.solve = self.solving.as_secs_f64();
+        BakeReport {
+            patches: self.mesh.patch_count,
+            elements: self.mesh.element_count(),
+            links: self.system.links.len(),
+            link_bytes: self.system.links.bytes(),
+            solver: self.params.solver,
+            form_factors: self.params.form_factors,
+            times,
+            iterations: last.iterations,
+            converged: last.converged,
+            residual: last.residual,
+            unshot_fraction: last.unshot_fraction,
+            timeline: self.timeline.clone(),
+            warnings: self.warnings.clone(),
+            has_emitters: self.has_emitters,
+        }
+    }
+
+    /// Ends the bake and hands over the results.
+    pub fn finish(self) -> BakeResult {
+        let radiosity = self.radiosity();
+        let report = self.report();
+        let surfaces = surface_means(&self.surfaces, &self.mesh, &radiosity);
+        BakeResult { mesh: self.mesh, system: self.system, radiosity, surfaces, report }
+    }
+}
+
+/// Elements whose centroid lies inside closed geometry (the floor under a block): most of the
+/// cosine-distributed probe rays from them hit back faces. Such elements receive nothing and no
+/// receiver sees them, so they must not dilute the radiosity of the source nodes they belong to.
+fn enclosed_elements(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<bool> {
+    use rayon::prelude::*;
+    const PROBES: u32 = 16;
+    (0..mesh.element_count())
+        .into_par_iter()
+        .map(|leaf| {
+            let node = mesh.leaf_node(leaf as u32);
+            let (t, b) = crate::form_factors::basis(node.normal);
+            let mut rng = crate::rng::Rng::new(crate::rng::hash(seed ^ 0xDEAD, leaf as u64, 0));
+            let mut back = 0;
+            for k in 0..PROBES {
+                let (u1, u2) = ((f64::from(k % 4) + rng.f64()) / 4.0, (f64::from(k / 4) + rng.f64()) / 4.0);
+                let (r, phi) = (u1.sqrt(), std::f64::consts::TAU * u2);
+                let dir = t * (r * phi.cos()) + b * (r * phi.sin()) + node.normal * (1.0 - u1).max(0.0).sqrt();
+                if vis.closest_hit(node.centroid.as_vec3(), dir.as_vec3(), f32::INFINITY).is_some_and(|h| !h.front) {
+                    back += 1;
+                }
+            }
+            back * 2 > PROBES
+        })
+        .collect()
+}
+
+/// Per-node radiosity estimates `B̂` (max channel) for refinement, and the ambient level.
+fn estimates(mesh: &Mesh, rho: &[Rgb], source: &[Rgb]) -> (Vec<f64>, f64) {
+    let max3 = |v: &Rgb| v[0].max(v[1]).max(v[2]);
+    let (mut area, mut s_sum, mut r_sum) = (0.0, 0.0, 0.0);
+    for (i, &id) in mesh.leaves.iter().enumerate() {
+        let a = mesh.nodes[id as usize].area;
+        area += a;
+        s_sum += a * max3(&source[i]);
+        r_sum += a * max3(&rho[i]);
+    }
+    let rho_mean = (r_sum / area).min(0.99);
+    let amb = s_sum / area / (1.0 - rho_mean);
+    let mut bhat = vec![0.0; mesh.nodes.len()];
+    for n in (0..mesh.nodes.len()).rev() {
+        let node = &mesh.nodes[n];
+        bhat[n] = if node.is_leaf() {
+            let i = node.leaf_lo as usize;
+            max3(&source[i]) + max3(&rho[i]) * amb
+        } else {
+            (0..4).map(|k| bhat[(node.first_child + k) as usize]).fold(0.0, f64::max)
+        };
+    }
+    (bhat, amb)
+}

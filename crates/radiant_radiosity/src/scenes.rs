@@ -1,0 +1,48 @@
+//! Small scenes built in code, for tests, benchmarks and stress cases.
+
+use glam::DVec3;
+use radiant_scene::{Scene, Surface, Triangle};
+
+/// The 12 triangles of an axis-aligned box, facing inward (`inward`) or outward.
+pub fn box_triangles(lo: DVec3, hi: DVec3, inward: bool) -> Vec<[DVec3; 3]> {
+    let c = |i: usize| {
+        DVec3::new(
+            if i & 1 == 0 { lo.x } else { hi.x },
+            if i & 2 == 0 { lo.y } else { hi.y },
+            if i & 4 == 0 { lo.z } else { hi.z },
+        )
+    };
+    // Each face as a quad, counter-clockwise seen from outside.
+    let faces = [[0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 5, 4], [2, 6, 7, 3], [0, 2, 3, 1], [4, 5, 7, 6]];
+    let mut out = Vec::new();
+    for f in faces {
+        let q = f.map(c);
+        let (t1, t2) = ([q[0], q[1], q[2]], [q[0], q[2], q[3]]);
+        for t in [t1, t2] {
+            out.push(if inward { [t[0], t[2], t[1]] } else { t });
+        }
+    }
+    out
+}
+
+/// A quad `origin + s·u + t·v`, `s, t ∈ [0, 1]`, front side along `u × v`.
+pub fn quad(origin: DVec3, u: DVec3, v: DVec3) -> [[DVec3; 3]; 2] {
+    let p = [origin, origin + u, origin + u + v, origin + v];
+    [[p[0], p[1], p[2]], [p[0], p[2], p[3]]]
+}
+
+/// Adds a surface with the given triangles to a scene.
+pub fn add_surface(scene: &mut Scene, name: &str, rho: [f64; 3], emission: [f64; 3], tris: &[[DVec3; 3]]) -> u32 {
+    let id = scene.surfaces.len() as u32;
+    scene.surfaces.push(Surface { name: name.into(), material: name.into(), reflectance: rho, emission });
+    scene.triangles.extend(tris.iter().map(|&vertices| Triangle { vertices, surface: id }));
+    id
+}
+
+/// The furnace: a closed unit cube, every wall with reflectance `rho` and emission `e`.
+/// The exact radiosity is `e / (1 − ρ)` everywhere.
+pub fn furnace(rho: f64, e: f64) -> Scene {
+    let mut s = Scene::default();
+    add_surface(&mut s, "walls", [rho; 3], [e; 3], &box_triangles(DVec3::ZERO, DVec3::ONE, true));
+    s
+}

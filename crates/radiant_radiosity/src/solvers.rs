@@ -1,0 +1,503 @@
+//! Solvers for the radiosity system, each steppable within a time budget so a caller (the CLI's
+//! progress bar, an ECS system) can run it in slices: `step(budget) -> Progress`.
+//!
+//! - [`Jacobi`]: the lecture's iterative loop, `B ← S + ρ K B`, parallel over elements.
+//! - [`GaussSeidel`]: the same sweep using each new value at once.
+//! - [`Southwell`]: progressive shooting (Cohen et al. 1988) of the **unshot** radiosity, in
+//!   blocks of one input triangle's elements, with Feda & Purgathofer's overshooting and Cohen's
+//!   ambient term for display. Receiver `i` of shooter `j` gets `ρ_i F_ij ΔB_j` (gathering
+//!   form factors, so no area ratio and no `B_j`: the lecture's pseudo-code is wrong there).
+//! - [`Direct`]: dense LU (`faer`) of `(I − diag(ρ) K) B = S`: the small-N reference.
+//!
+//! All accumulate in `f64`. The residual `r = S + ρKB − B` is reported as the area-weighted
+//! L2 norm relative to `B`; the unshot fraction is `‖r‖₁ / ‖S‖₁` (area-weighted, all channels).
+
+use std::time::{Duration, Instant};
+
+use rayon::prelude::*;
+
+use crate::BakeError;
+use crate::system::{Rgb, System};
+
+/// The solvers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum SolverKind {
+    /// Jacobi iteration.
+    Jacobi,
+    /// Gauss–Seidel iteration.
+    GaussSeidel,
+    /// Progressive shooting (Southwell relaxation).
+    Southwell,
+    /// Dense direct solve.
+    Direct,
+}
+
+impl SolverKind {
+    /// All solvers, in report order.
+    pub const ALL: [SolverKind; 4] = [Self::Jacobi, Self::GaussSeidel, Self::Southwell, Self::Direct];
+
+    /// The CLI name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Jacobi => "jacobi",
+            Self::GaussSeidel => "gauss-seidel",
+            Self::Southwell => "southwell",
+            Self::Direct => "direct",
+        }
+    }
+
+    /// Parses a CLI name.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s {
+            "progressive" | "shooting" => Some(Self::Southwell),
+            "gs" | "gauss_seidel" | "gaussseidel" => Some(Self::GaussSeidel),
+            _ => Self::ALL.into_iter().find(|k| k.name() == s),
+        }
+    }
+}
+
+/// Solver parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SolverParams {
+    /// Converged when the relative residual falls to this (default: 1e-4).
+    pub tolerance: f64,
+    /// Southwell: overshoot by the expected ambient (default: true).
+    pub overshoot: bool,
+    /// Southwell: add Cohen's ambient term to the displayed radiosity (default: true).
+    pub ambient: bool,
+    /// Direct: refuse more elements than this (default: 4096; memory is 8 N² bytes).
+    pub max_direct: usize,
+}
+
+impl Default for SolverParams {
+    fn default() -> Self {
+        SolverParams { tolerance: 1e-4, overshoot: true, ambient: true, max_direct: 4096 }
+    }
+}
+
+/// Where a solver stands after a step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Progress {
+    /// Sweeps (Jacobi, Gauss–Seidel), shots (Southwell) or 1 (direct).
+    pub iterations: u64,
+    /// Relative residual (see the module docs).
+    pub residual: f64,
+    /// Unshot energy fraction.
+    pub unshot_fraction: f64,
+    /// Whether the tolerance is met.
+    pub converged: bool,
+}
+
+/// A radiosity solver.
+pub trait Solver: Send {
+    /// Which solver.
+    fn kind(&self) -> SolverKind;
+    /// Works for about `budget` (at least one unit of work), then reports.
+    fn step(&mut self, sys: &System, budget: Duration) -> Result<Progress, BakeError>;
+    /// The current estimate per element, as it should be displayed.
+    fn radiosity(&self, sys: &System) -> Vec<Rgb>;
+}
+
+/// Creates a solver, starting from `B = S`.
+pub fn new_solver(kind: SolverKind, sys: &System, params: SolverParams) -> Box<dyn Solver> {
+    match kind {
+        SolverKind::Jacobi => Box::new(Jacobi::new(sys, params)),
+        SolverKind::GaussSeidel => Box::new(GaussSeidel::new(sys, params)),
+        SolverKind::Southwell => Box::new(Southwell::new(sys, params)),
+        SolverKind::Direct => Box::new(Direct::new(params)),
+    }
+}
+
+fn l1(sys: &System, v: &[Rgb]) -> f64 {
+    v.iter().zip(&sys.area).map(|(x, a)| a * (x[0].abs() + x[1].abs() + x[2].abs())).sum()
+}
+
+fn progress_from_residual(sys: &System, b: &[Rgb], r: &[Rgb], iterations: u64, tol: f64) -> Progress {
+    let (rn, bn) = (sys.norm(r), sys.norm(b));
+    let residual = if bn > 0.0 { rn / bn } else if rn > 0.0 { f64::INFINITY } else { 0.0 };
+    let sp = sys.source_power();
+    let unshot_fraction = if sp > 0.0 { l1(sys, r) / sp } else { 0.0 };
+    Progress { iterations, residual, unshot_fraction, converged: residual <= tol }
+}
+
+/// Jacobi iteration.
+pub struct Jacobi {
+    b: Vec<Rgb>,
+    nodes: Vec<Rgb>,
+    iterations: u64,
+    params: SolverParams,
+}
+
+impl Jacobi {
+    /// Starts from `B = S`.
+    pub fn new(sys: &System, params: SolverParams) -> Self {
+        Jacobi { b: sys.source.clone(), nodes: vec![[0.0; 3]; sys.node_area.len()], iterations: 0, params }
+    }
+}
+
+impl Solver for Jacobi {
+    fn kind(&self) -> SolverKind {
+        SolverKind::Jacobi
+    }
+    fn step(&mut self, sys: &System, budget: Duration) -> Result<Progress, BakeError> {
+        let start = Instant::now();
+        loop {
+            sys.pull(&self.b, &mut self.nodes);
+            let nodes = &self.nodes;
+            let next: Vec<Rgb> = (0..sys.len())
+                .into_par_iter()
+                .map(|i| {
+                    let g = sys.gather(i, nodes);
+                    std::array::from_fn(|c| sys.source[i][c] + sys.rho[i][c] * g[c])
+                })
+                .collect();
+            // The change is exactly the residual of the previous iterate.
+            let r: Vec<Rgb> = next.iter().zip(&self.b).map(|(n, o)| std::array::from_fn(|c| n[c] - o[c])).collect();
+            let p = progress_from_residual(sys, &self.b, &r, self.iterations + 1, self.params.tolerance);
+            self.b = next;
+            self.iterations += 1;
+            if p.converged || start.elapsed() >= budget || !p.residual.is_finite() {
+                return Ok(p);
+            }
+        }
+    }
+    fn radiosity(&self, _sys: &System) -> Vec<Rgb> {
+        self.b.clone()
+    }
+}
+
+/// Gauss–Seidel iteration, in element order, updating node means as it goes.
+pub struct GaussSeidel {
+    b: Vec<Rgb>,
+    nodes: Vec<Rgb>,
+    iterations: u64,
+    params: SolverParams,
+}
+
+impl GaussSeidel {
+    /// Starts from `B = S`.
+    pub fn new(sys: &System, params: SolverParams) -> Self {
+        GaussSeidel { b: sys.source.clone(), nodes: vec![[0.0; 3]; sys.node_area.len()], iterations: 0, params }
+    }
+}
+
+impl Solver for GaussSeidel {
+    fn kind(&self) -> SolverKind {
+        SolverKind::GaussSeidel
+    }
+    fn step(&mut self, sys: &System, budget: Duration) -> Result<Progress, BakeError> {
+        let start = Instant::now();
+        loop {
+            // Fresh means each sweep, so rounding in the incremental updates cannot drift.
+            sys.pull(&self.b, &mut self.nodes);
+            for i in 0..sys.len() {
+                let g = sys.gather(i, &self.nodes);
+                let new: Rgb = std::array::from_fn(|c| sys.source[i][c] + sys.rho[i][c] * g[c]);
+                let d: Rgb = std::array::from_fn(|c| new[c] - self.b[i][c]);
+                self.b[i] = new;
+                let a = sys.weight[i];
+                let mut n = sys.leaf_node[i];
+                while n != u32::MAX && a > 0.0 {
+                    let w = a / sys.node_weight[n as usize];
+                    let v = &mut self.nodes[n as usize];
+                    for c in 0..3 {
+                        v[c] += w * d[c];
+                    }
+                    n = sys.node_parent[n as usize];
+                }
+            }
+            self.iterations += 1;
+            if start.elapsed() >= budget {
+                break;
+            }
+            // Check convergence every few sweeps within a long budget.
+            if self.iterations % 4 == 0 {
+                let r = sys.residual(&self.b);
+                let p = progress_from_residual(sys, &self.b, &r, self.iterations, self.params.tolerance);
+                if p.converged || !p.residual.is_finite() {
+                    return Ok(p);
+                }
+            }
+        }
+        let r = sys.residual(&self.b);
+        Ok(progress_from_residual(sys, &self.b, &r, self.iterations, self.params.tolerance))
+    }
+    fn radiosity(&self, _sys: &System) -> Vec<Rgb> {
+        self.b.clone()
+    }
+}
+
+/// Progressive shooting by blocks (one input triangle's elements at a time).
+pub struct Southwell {
+    b: Vec<Rgb>,
+    unshot: Vec<Rgb>,
+    /// Per input triangle: area-weighted L1 of unshot.
+    power: Vec<f64>,
+    /// Column index: links by source node.
+    col_ptr: Vec<usize>,
+    col_recv: Vec<u32>,
+    col_ff: Vec<f32>,
+    node_unshot: Vec<Rgb>,
+    gathered: Vec<Rgb>,
+    touched: Vec<u32>,
+    mean_rho: Rgb,
+    total_area: f64,
+    shots: u64,
+    params: SolverParams,
+}
+
+impl Southwell {
+    /// Builds the column index and starts from `B = ΔB = S`.
+    pub fn new(sys: &System, params: SolverParams) -> Self {
+        let nn = sys.node_area.len();
+        let mut col_ptr = vec![0usize; nn + 1];
+        for &s in &sys.links.src {
+            col_ptr[s as usize + 1] += 1;
+        }
+        for k in 0..nn {
+            col_ptr[k + 1] += col_ptr[k];
+        }
+        let mut fill = col_ptr.clone();
+        let mut col_recv = vec![0u32; sys.links.len()];
+        let mut col_ff = vec![0f32; sys.links.len()];
+        for i in 0..sys.len() {
+            for k in sys.links.row[i]..sys.links.row[i + 1] {
+                let s = sys.links.src[k] as usize;
+                col_recv[fill[s]] = i as u32;
+                col_ff[fill[s]] = sys.links.ff[k];
+                fill[s] += 1;
+            }
+        }
+        let total_area: f64 = sys.area.iter().sum();
+        let mut mean_rho = [0.0; 3];
+        for (r, a) in sys.rho.iter().zip(&sys.area) {
+            for c in 0..3 {
+                mean_rho[c] += r[c] * a / total_area;
+            }
+        }
+        let mut power = vec![0.0; sys.root_nodes.len()];
+        for i in 0..sys.len() {
+            let s = &sys.source[i];
+            power[sys.leaf_root[i] as usize] += sys.area[i] * (s[0].abs() + s[1].abs() + s[2].abs());
+        }
+        Southwell {
+            b: sys.source.clone(),
+            unshot: sys.source.clone(),
+            power,
+            col_ptr,
+            col_recv,
+            col_ff,
+            node_unshot: vec![[0.0; 3]; nn],
+            gathered: vec![[0.0; 3]; sys.len()],
+            touched: Vec::new(),
+            mean_rho,
+            total_area,
+            shots: 0,
+            params,
+        }
+    }
+
+    /// Cohen et al.'s ambient: the unshot energy, spread evenly and reflected `1/(1−ρ̄)` times.
+    fn ambient(&self, sys: &System) -> Rgb {
+        let mut a = [0.0; 3];
+        for (u, ar) in self.unshot.iter().zip(&sys.area) {
+            for c in 0..3 {
+                a[c] += u[c] * ar;
+            }
+        }
+        std::array::from_fn(|c| a[c] / self.total_area / (1.0 - self.mean_rho[c].min(0.999_999)))
+    }
+
+    fn shoot(&mut self, sys: &System, root: usize) {
+        let (lo, hi) = sys.root_nodes[root];
+        let (llo, lhi) = (sys.node_leaf_lo[lo as usize] as usize, sys.node_leaf_hi[lo as usize] as usize);
+        // What each element shoots: its unshot radiosity, plus the overshoot.
+        let amb = if self.params.overshoot { self.ambient(sys) } else { [0.0; 3] };
+        let mut shot = vec![[0.0; 3]; lhi - llo];
+        for (k, i) in (llo..lhi).enumerate() {
+            let over: Rgb = std::array::from_fn(|c| sys.rho[i][c] * amb[c].max(0.0));
+            shot[k] = std::array::from_fn(|c| self.unshot[i][c] + over[c]);
+            for c in 0..3 {
+                self.b[i][c] += over[c];
+                self.unshot[i][c] = -over[c];
+            }
+        }
+        // Node means of what is shot, over this tree only.
+        let mut full = std::mem::take(&mut self.gathered);
+        for (k, i) in (llo..lhi).enumerate() {
+            full[i] = shot[k];
+        }
+        sys.pull_range(&full, &mut self.node_unshot, lo, hi);
+        for i in llo..lhi {
+            full[i] = [0.0; 3];
+        }
+        self.gathered = full;
+        for s in lo..hi {
+            let d = self.node_unshot[s as usize];
+            if d == [0.0; 3] {
+                continue;
+            }
+            for k in self.col_ptr[s as usize]..self.col_ptr[s as usize + 1] {
+                let i = self.col_recv[k] as usize;
+                let f = f64::from(self.col_ff[k]);
+                let g = &mut self.gathered[i];
+                if *g == [0.0; 3] {
+                    self.touched.push(i as u32);
+                }
+                for c in 0..3 {
+                    g[c] += f * d[c];
+                }
+            }
+        }
+        let mut pw_root = 0.0;
+        for i in llo..lhi {
+            let u = &self.unshot[i];
+            pw_root += sys.area[i] * (u[0].abs() + u[1].abs() + u[2].abs());
+        }
+        self.power[root] = pw_root;
+        for &i in &self.touched {
+            let i = i as usize;
+            let g = std::mem::replace(&mut self.gathered[i], [0.0; 3]);
+            let a = sys.area[i];
+            let old = self.unshot[i];
+            for c in 0..3 {
+                let d = sys.rho[i][c] * g[c];
+                self.b[i][c] += d;
+                self.unshot[i][c] += d;
+            }
+            let new = self.unshot[i];
+            let r = sys.leaf_root[i] as usize;
+            self.power[r] += a * ((new[0].abs() + new[1].abs() + new[2].abs()) - (old[0].abs() + old[1].abs() + old[2].abs()));
+        }
+        self.touched.clear();
+        self.shots += 1;
+    }
+}
+
+impl Solver for Southwell {
+    fn kind(&self) -> SolverKind {
+        SolverKind::Southwell
+    }
+    fn step(&mut self, sys: &System, budget: Duration) -> Result<Progress, BakeError> {
+        let start = Instant::now();
+        let sp = sys.source_power();
+        loop {
+            let total: f64 = self.power.iter().sum();
+            let unshot_fraction = if sp > 0.0 { total / sp } else { 0.0 };
+            let done = unshot_fraction <= self.params.tolerance || total <= 0.0;
+            if done || start.elapsed() >= budget {
+                let rn = sys.norm(&self.unshot);
+                let bn = sys.norm(&self.b);
+                let residual = if bn > 0.0 { rn / bn } else { 0.0 };
+                return Ok(Progress {
+                    iterations: self.shots,
+                    residual,
+                    unshot_fraction,
+                    converged: done && residual <= self.params.tolerance.max(unshot_fraction),
+                });
+            }
+            let mut best = 0;
+            for (k, &p) in self.power.iter().enumerate() {
+                if p > self.power[best] {
+                    best = k;
+                }
+            }
+            self.shoot(sys, best);
+        }
+    }
+    fn radiosity(&self, sys: &System) -> Vec<Rgb> {
+        if !self.params.ambient {
+            return self.b.clone();
+        }
+        let amb = self.ambient(sys);
+        self.b
+            .iter()
+            .zip(&sys.rho)
+            .map(|(b, r)| std::array::from_fn(|c| b[c] + r[c] * amb[c]))
+            .collect()
+    }
+}
+
+/// Dense LU of the element system; one factorisation per distinct reflectance channel.
+pub struct Direct {
+    b: Option<Vec<Rgb>>,
+    params: SolverParams,
+}
+
+impl Direct {
+    /// A direct solver; the work happens in the first step.
+    pub fn new(params: SolverParams) -> Self {
+        Direct { b: None, params }
+    }
+
+    /// The dense gathering matrix `K` (row-major, `n × n`): `K_ij = Σ_links F_is w_j / w_s`.
+    pub fn dense_k(sys: &System) -> Vec<f64> {
+        let n = sys.len();
+        let mut k = vec![0.0; n * n];
+        for i in 0..n {
+            for l in sys.links.row[i]..sys.links.row[i + 1] {
+                let s = sys.links.src[l] as usize;
+                if sys.node_weight[s] <= 0.0 {
+                    continue;
+                }
+                let f = f64::from(sys.links.ff[l]) / sys.node_weight[s];
+                for j in sys.node_leaf_lo[s]..sys.node_leaf_hi[s] {
+                    k[i * n + j as usize] += f * sys.weight[j as usize];
+                }
+            }
+        }
+        k
+    }
+
+    fn solve(&self, sys: &System) -> Result<Vec<Rgb>, BakeError> {
+        use faer::prelude::*;
+        let n = sys.len();
+        if n > self.params.max_direct {
+            return Err(BakeError::TooLargeForDirect { elements: n, limit: self.params.max_direct });
+        }
+        let k = Self::dense_k(sys);
+        let mut out = vec![[0.0; 3]; n];
+        let mut done = [false; 3];
+        for c in 0..3 {
+            if done[c] {
+                continue;
+            }
+            // Channels with the same reflectance everywhere share one factorisation.
+            let same: Vec<usize> = (c..3).filter(|&d| !done[d] && sys.rho.iter().all(|r| r[d] == r[c])).collect();
+            let a = Mat::<f64>::from_fn(n, n, |i, j| f64::from(u8::from(i == j)) - sys.rho[i][c] * k[i * n + j]);
+            let rhs = Mat::<f64>::from_fn(n, same.len(), |i, j| sys.source[i][same[j]]);
+            let x = a.partial_piv_lu().solve(&rhs);
+            for (j, &d) in same.iter().enumerate() {
+                for i in 0..n {
+                    let v = x[(i, j)];
+                    if !v.is_finite() {
+                        return Err(BakeError::Singular);
+                    }
+                    out[i][d] = v;
+                }
+                done[d] = true;
+            }
+        }
+        Ok(out)
+    }
+}
+
+impl Solver for Direct {
+    fn kind(&self) -> SolverKind {
+        SolverKind::Direct
+    }
+    fn step(&mut self, sys: &System, _budget: Duration) -> Result<Progress, BakeError> {
+        if self.b.is_none() {
+            self.b = Some(self.solve(sys)?);
+        }
+        let b = self.b.as_deref().unwrap_or_default();
+        let r = sys.residual(b);
+        let mut p = progress_from_residual(sys, b, &r, 1, self.params.tolerance);
+        // A direct solve is done whatever its rounding; the residual says how well.
+        p.converged = p.residual.is_finite();
+        Ok(p)
+    }
+    fn radiosity(&self, sys: &System) -> Vec<Rgb> {
+        self.b.clone().unwrap_or_else(|| vec![[0.0; 3]; sys.len()])
+    }
+}
