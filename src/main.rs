@@ -1,1 +1,235 @@
-fn main() {}
+//! The `radiant` command line: bake a scene, or measure error against run time.
+
+mod bake_cmd;
+mod converge_cmd;
+mod output;
+mod plot;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand};
+use radiant::radiosity::{BakeParams, FormFactorKind, SolverKind};
+
+/// Radiosity light baking: diffuse global illumination with honest error reporting.
+#[derive(Parser, Debug)]
+#[command(name = "radiant", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Bake a scene: light maps, per-surface and per-element radiosity, and a report.
+    Bake(BakeArgs),
+    /// Run several method × form-factor combinations and plot their error against run time.
+    Converge(ConvergeArgs),
+}
+
+/// Which scene to load.
+#[derive(Args, Debug, Clone)]
+pub(crate) struct SceneArgs {
+    /// A glTF 2.0 file (.gltf or .glb).
+    #[arg(required_unless_present = "builtin", conflicts_with = "builtin")]
+    pub(crate) scene: Option<PathBuf>,
+    /// A builtin scene instead of a file: cornell-box.
+    #[arg(long)]
+    pub(crate) builtin: Option<String>,
+}
+
+/// Settings shared by `bake` and `converge`.
+#[derive(Args, Debug, Clone)]
+pub(crate) struct SolveArgs {
+    /// Target longest edge of a patch, in scene units (default: a quarter of the scene's extent).
+    #[arg(long)]
+    pub(crate) patch_size: Option<f64>,
+    /// Subdivision levels from patches down to elements; each level splits a triangle in 4.
+    #[arg(long, default_value_t = 2)]
+    pub(crate) element_levels: u8,
+    /// Link refinement threshold (smaller: more accurate, slower).
+    #[arg(long, default_value_t = 0.02)]
+    pub(crate) refinement: f64,
+    /// Far-field factor: above the patch level, link coarser sources whose transport is below
+    /// this times the refinement threshold.
+    #[arg(long, default_value_t = 0.05)]
+    pub(crate) far_field: f64,
+    /// Relative residual at which the solver stops.
+    #[arg(long, default_value_t = 1e-4)]
+    pub(crate) tolerance: f64,
+    /// Stop solving after this many seconds, converged or not.
+    #[arg(long)]
+    pub(crate) time_limit: Option<f64>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub(crate) threads: Option<usize>,
+    /// Seed for every random choice.
+    #[arg(long, default_value_t = 1)]
+    pub(crate) seed: u64,
+    /// Hemicube resolution (pixels along the top face).
+    #[arg(long, default_value_t = 128)]
+    pub(crate) hemicube_resolution: u32,
+    /// Monte Carlo rays per element.
+    #[arg(long, default_value_t = 256)]
+    pub(crate) mc_rays: u32,
+    /// Largest element count for the direct solver.
+    #[arg(long, default_value_t = 4096)]
+    pub(crate) max_direct: usize,
+}
+
+/// `radiant bake`.
+#[derive(Args, Debug)]
+pub(crate) struct BakeArgs {
+    #[command(flatten)]
+    pub(crate) scene: SceneArgs,
+    /// Output directory.
+    #[arg(long, short)]
+    pub(crate) out: PathBuf,
+    /// Solver: jacobi, gauss-seidel, southwell (progressive shooting) or direct.
+    #[arg(long, default_value = "gauss-seidel")]
+    pub(crate) method: String,
+    /// Form factors: analytic, hemicube, raycast or montecarlo.
+    #[arg(long, default_value = "analytic")]
+    pub(crate) form_factors: String,
+    /// Per-surface reference CSV to report the error against (default for the builtin Cornell
+    /// box: the shipped Mitsuba 3 reference).
+    #[arg(long)]
+    pub(crate) reference: Option<PathBuf>,
+    /// Width of the light-map atlas in texels.
+    #[arg(long, default_value_t = 1024)]
+    pub(crate) lightmap_width: u32,
+    #[command(flatten)]
+    pub(crate) solve: SolveArgs,
+}
+
+/// `radiant converge`.
+#[derive(Args, Debug)]
+pub(crate) struct ConvergeArgs {
+    #[command(flatten)]
+    pub(crate) scene: SceneArgs,
+    /// Output directory.
+    #[arg(long, short)]
+    pub(crate) out: PathBuf,
+    /// Solvers to run, comma separated.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "jacobi,gauss-seidel,southwell,direct"
+    )]
+    pub(crate) methods: Vec<String>,
+    /// Form-factor methods to run, comma separated.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "analytic,hemicube,raycast,montecarlo"
+    )]
+    pub(crate) form_factors: Vec<String>,
+    /// `direct` (the direct solve on the same mesh: solver error) or a per-surface CSV (total
+    /// error). Default: the shipped Mitsuba 3 reference for the builtin Cornell box, else direct.
+    #[arg(long)]
+    pub(crate) reference: Option<String>,
+    /// Seconds between error samples.
+    #[arg(long, default_value_t = 0.01)]
+    pub(crate) sample_every: f64,
+    #[command(flatten)]
+    pub(crate) solve: SolveArgs,
+}
+
+impl SolveArgs {
+    /// Bake parameters for one solver and form-factor method.
+    pub(crate) fn params(
+        &self,
+        solver: SolverKind,
+        ff: FormFactorKind,
+    ) -> anyhow::Result<BakeParams> {
+        let mut p = BakeParams::default();
+        p.mesh.patch_size = match self.patch_size {
+            Some(s) if s > 0.0 && s.is_finite() => s,
+            Some(s) => anyhow::bail!("--patch-size {s} must be a positive number"),
+            None => 0.0,
+        };
+        p.mesh.element_levels = self.element_levels;
+        p.links.refinement = self.refinement;
+        p.links.far_field = self.far_field;
+        p.form_factors = ff;
+        p.ff.seed = self.seed;
+        p.ff.hemicube_resolution = self.hemicube_resolution;
+        p.ff.monte_carlo_rays = self.mc_rays;
+        p.solver = solver;
+        p.solver_params.tolerance = self.tolerance;
+        p.solver_params.max_direct = self.max_direct;
+        if let Some(t) = self.time_limit {
+            anyhow::ensure!(
+                t > 0.0 && t.is_finite(),
+                "--time-limit {t} must be a positive number of seconds"
+            );
+            p.time_limit = Some(std::time::Duration::from_secs_f64(t));
+        }
+        Ok(p)
+    }
+
+    /// Sets the global thread pool.
+    pub(crate) fn init_threads(&self) -> anyhow::Result<()> {
+        if let Some(n) = self.threads {
+            anyhow::ensure!(n > 0, "--threads must be at least 1");
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build_global()?;
+        }
+        Ok(())
+    }
+}
+
+/// Parses a solver name.
+pub(crate) fn parse_solver(s: &str) -> anyhow::Result<SolverKind> {
+    SolverKind::parse(s).ok_or_else(|| {
+        anyhow::anyhow!("unknown method '{s}' (jacobi, gauss-seidel, southwell, direct)")
+    })
+}
+
+/// Parses a form-factor method name.
+pub(crate) fn parse_ff(s: &str) -> anyhow::Result<FormFactorKind> {
+    FormFactorKind::parse(s).ok_or_else(|| {
+        anyhow::anyhow!(
+            "unknown form-factor method '{s}' (analytic, hemicube, raycast, montecarlo)"
+        )
+    })
+}
+
+/// Loads the scene named by the arguments.
+pub(crate) fn load_scene(args: &SceneArgs) -> anyhow::Result<(radiant::scene::Scene, String)> {
+    match (&args.scene, &args.builtin) {
+        (_, Some(name)) => Ok((radiant::scene::builtin(name)?, name.clone())),
+        (Some(path), None) => {
+            let scene = radiant::scene::load_gltf(path)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            Ok((scene, path.display().to_string()))
+        }
+        (None, None) => anyhow::bail!("give a scene file or --builtin cornell-box"),
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("RUST_LOG")
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let result = match cli.command {
+        Some(Command::Bake(args)) => bake_cmd::run(&args),
+        Some(Command::Converge(args)) => converge_cmd::run(&args),
+        None => bake_cmd::run_default(),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // One clear line, no backtrace.
+            let msg = format!("{e:#}").replace('\n', " ");
+            eprintln!("error: {msg}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -37,7 +37,11 @@ pub fn linear_to_srgb(linear: f64) -> f64 {
 
 /// Linear → 8-bit sRGB with rounding; inputs are clamped to [0, 1] first (display encoding).
 pub fn linear_to_srgb8(linear: f64) -> u8 {
-    let e = linear_to_srgb(if linear.is_nan() { 0.0 } else { linear.clamp(0.0, 1.0) });
+    let e = linear_to_srgb(if linear.is_nan() {
+        0.0
+    } else {
+        linear.clamp(0.0, 1.0)
+    });
     (e * 255.0).round().clamp(0.0, 255.0) as u8
 }
 
@@ -111,9 +115,22 @@ mod tests {
     #[test]
     fn tonemaps_are_bounded_and_finite() {
         for op in [Tonemap::Clamp, Tonemap::Reinhard, Tonemap::AcesFitted] {
-            for x in [0.0, 1e-6, 0.18, 1.0, 10.0, 1e9, f64::INFINITY, f64::NAN, -1.0] {
+            for x in [
+                0.0,
+                1e-6,
+                0.18,
+                1.0,
+                10.0,
+                1e9,
+                f64::INFINITY,
+                f64::NAN,
+                -1.0,
+            ] {
                 let y = op.apply([x; 3]);
-                assert!(y.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)), "{op:?} {x}");
+                assert!(
+                    y.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)),
+                    "{op:?} {x}"
+                );
             }
         }
     }

@@ -7,7 +7,7 @@ use radiant_scene::{Scene, Surface};
 use radiant_visibility::{Bvh, Visibility};
 
 use crate::form_factors::{self, FfContext, FormFactorKind, FormFactorParams};
-use crate::links::{self, LinkParams};
+use crate::links::{self, LinkParams, Oracle};
 use crate::mesh::{Mesh, MeshParams};
 use crate::metrics::{SurfaceMean, surface_means};
 use crate::solvers::{Progress, Solver, SolverKind, SolverParams, new_solver};
@@ -111,6 +111,9 @@ pub struct BakeReport {
     pub has_emitters: bool,
 }
 
+/// Steps without progress after which [`Bake::run_to_end`] gives up.
+pub const STALL_STEPS: u32 = 200;
+
 /// Progress callbacks.
 #[derive(Debug)]
 pub enum BakeEvent<'a> {
@@ -154,16 +157,34 @@ pub struct Bake {
 
 fn validate(scene: &Scene) -> Result<(), BakeError> {
     for s in &scene.surfaces {
-        let bad = |what: String| BakeError::InvalidMaterial { surface: s.name.clone(), what };
-        if s.reflectance.iter().any(|r| !r.is_finite() || !(0.0..=1.0).contains(r)) {
-            return Err(bad(format!("reflectance {:?} is outside [0, 1]", s.reflectance)));
+        let bad = |what: String| BakeError::InvalidMaterial {
+            surface: s.name.clone(),
+            what,
+        };
+        if s.reflectance
+            .iter()
+            .any(|r| !r.is_finite() || !(0.0..=1.0).contains(r))
+        {
+            return Err(bad(format!(
+                "reflectance {:?} is outside [0, 1]",
+                s.reflectance
+            )));
         }
         if s.emission.iter().any(|e| !e.is_finite() || *e < 0.0) {
-            return Err(bad(format!("emission {:?} is negative or not finite", s.emission)));
+            return Err(bad(format!(
+                "emission {:?} is negative or not finite",
+                s.emission
+            )));
         }
     }
-    if scene.triangles.iter().any(|t| t.surface as usize >= scene.surfaces.len()) {
-        return Err(BakeError::InvalidScene("a triangle names a surface that does not exist".into()));
+    if scene
+        .triangles
+        .iter()
+        .any(|t| t.surface as usize >= scene.surfaces.len())
+    {
+        return Err(BakeError::InvalidScene(
+            "a triangle names a surface that does not exist".into(),
+        ));
     }
     Ok(())
 }
@@ -175,15 +196,24 @@ impl Bake {
     }
 
     /// As [`Bake::new`], calling `progress(done, total)` while form factors are computed.
-    pub fn with_progress(scene: &Scene, params: &BakeParams, progress: &(dyn Fn(usize, usize) + Sync)) -> Result<Bake, BakeError> {
+    pub fn with_progress(
+        scene: &Scene,
+        params: &BakeParams,
+        progress: &(dyn Fn(usize, usize) + Sync),
+    ) -> Result<Bake, BakeError> {
         let started = Instant::now();
         validate(scene)?;
         let p = &params.solver_params;
         if !(p.tolerance.is_finite() && p.tolerance > 0.0) {
-            return Err(BakeError::InvalidParameter(format!("tolerance {} must be positive", p.tolerance)));
+            return Err(BakeError::InvalidParameter(format!(
+                "tolerance {} must be positive",
+                p.tolerance
+            )));
         }
         if !(params.links.refinement.is_finite() && params.links.refinement > 0.0) {
-            return Err(BakeError::InvalidParameter("refinement must be positive".into()));
+            return Err(BakeError::InvalidParameter(
+                "refinement must be positive".into(),
+            ));
         }
         let mut times = PhaseTimes::default();
         let mut t = Instant::now();
@@ -200,7 +230,8 @@ impl Bake {
         let mut rho = Vec::with_capacity(n);
         let mut source = Vec::with_capacity(n);
         for &id in &mesh.leaves {
-            let s = &scene.surfaces[mesh.root_surface[mesh.nodes[id as usize].root as usize] as usize];
+            let s =
+                &scene.surfaces[mesh.root_surface[mesh.nodes[id as usize].root as usize] as usize];
             rho.push(s.reflectance);
             source.push(s.emission);
         }
@@ -216,17 +247,35 @@ impl Bake {
 
         let mut warnings = scene.warnings();
         let has_emitters = source.iter().any(|s| s.iter().any(|&v| v > 0.0));
+        let dead = if has_emitters {
+            enclosed_elements(&mesh, &bvh, params.ff.seed)
+        } else {
+            vec![false; n]
+        };
         let links = if has_emitters {
             let (bhat, amb) = estimates(&mesh, &rho, &source);
-            let ctx = FfContext { mesh: &mesh, vis: &bvh, params: params.ff };
+            let ctx = FfContext {
+                mesh: &mesh,
+                vis: &bvh,
+                params: params.ff,
+            };
             let method = form_factors::method(params.form_factors);
-            links::build(&ctx, method, &bhat, amb, &params.links, &|d| progress(d, n))
+            let eps = (params.links.refinement * amb).max(f64::MIN_POSITIVE);
+            links::build(
+                &ctx,
+                method,
+                Oracle { bhat: &bhat, eps },
+                &params.links,
+                &|d| progress(d, n),
+            )
         } else {
             warnings.push("no emitters and no lights: nothing to bake, all radiosity is 0".into());
-            links::Links { row: vec![0; n + 1], ..Default::default() }
+            links::Links {
+                row: vec![0; n + 1],
+                ..Default::default()
+            }
         };
         lap(&mut times.form_factors);
-        let dead = if has_emitters { enclosed_elements(&mesh, &bvh, params.ff.seed) } else { vec![false; n] };
         let dead_count = dead.iter().filter(|&&d| d).count();
         if dead_count > 0 {
             tracing::debug!("{dead_count} elements lie inside closed geometry");
@@ -255,7 +304,12 @@ impl Bake {
         let p = if self.has_emitters {
             self.solver.step(&self.system, budget)?
         } else {
-            Progress { iterations: 0, residual: 0.0, unshot_fraction: 0.0, converged: true }
+            Progress {
+                iterations: 0,
+                residual: 0.0,
+                unshot_fraction: 0.0,
+                converged: true,
+            }
         };
         self.solving += t.elapsed();
         self.timeline.push(TimelinePoint {
@@ -280,15 +334,42 @@ impl Bake {
 
     /// The current radiosity per element.
     pub fn radiosity(&self) -> Vec<Rgb> {
-        if self.has_emitters { self.solver.radiosity(&self.system) } else { vec![[0.0; 3]; self.system.len()] }
+        if self.has_emitters {
+            self.solver.radiosity(&self.system)
+        } else {
+            vec![[0.0; 3]; self.system.len()]
+        }
     }
 
     /// Steps until converged or the time limit, calling `on_event` after each step.
-    pub fn run_to_end(mut self, on_event: &mut dyn FnMut(BakeEvent)) -> Result<BakeResult, BakeError> {
+    ///
+    /// A solve that stops making progress (the residual has not fallen by 1 % over
+    /// [`STALL_STEPS`] steps: reflectance 1 in a closed scene, say) ends unconverged with a
+    /// warning rather than running forever.
+    pub fn run_to_end(
+        mut self,
+        on_event: &mut dyn FnMut(BakeEvent),
+    ) -> Result<BakeResult, BakeError> {
+        let (mut best, mut since_best) = (f64::INFINITY, 0u32);
         loop {
             let p = self.step(self.params.step_budget)?;
             on_event(BakeEvent::Solve(&p, self.elapsed()));
-            let out_of_time = self.params.time_limit.is_some_and(|l| self.started.elapsed() >= l);
+            let out_of_time = self
+                .params
+                .time_limit
+                .is_some_and(|l| self.started.elapsed() >= l);
+            if p.residual < 0.99 * best {
+                (best, since_best) = (p.residual, 0);
+            } else {
+                since_best += 1;
+            }
+            if since_best >= STALL_STEPS {
+                self.warnings.push(format!(
+                    "the solver stopped converging (residual {:.2e}); reflectance 1 in a closed scene?",
+                    p.residual
+                ));
+                break;
+            }
             if p.converged || out_of_time || !p.residual.is_finite() {
                 break;
             }
@@ -298,7 +379,12 @@ impl Bake {
 
     /// The report as things stand.
     pub fn report(&self) -> BakeReport {
-        let last = self.last.unwrap_or(Progress { iterations: 0, residual: f64::INFINITY, unshot_fraction: 1.0, converged: false });
+        let last = self.last.unwrap_or(Progress {
+            iterations: 0,
+            residual: f64::INFINITY,
+            unshot_fraction: 1.0,
+            converged: false,
+        });
         let mut times = self.times;
         times.solve = self.solving.as_secs_f64();
         BakeReport {
@@ -324,12 +410,18 @@ impl Bake {
         let radiosity = self.radiosity();
         let report = self.report();
         let surfaces = surface_means(&self.surfaces, &self.mesh, &radiosity);
-        BakeResult { mesh: self.mesh, system: self.system, radiosity, surfaces, report }
+        BakeResult {
+            mesh: self.mesh,
+            system: self.system,
+            radiosity,
+            surfaces,
+            report,
+        }
     }
 }
 
-/// Elements whose centroid lies inside closed geometry (the floor under a block): most of the
-/// cosine-distributed probe rays from them hit back faces. Such elements receive nothing and no
+/// Elements whose centroid lies inside closed geometry (the floor under a block): every one of
+/// the cosine-distributed probe rays from them hits a back face. Such elements receive nothing and no
 /// receiver sees them, so they must not dilute the radiosity of the source nodes they belong to.
 fn enclosed_elements(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<bool> {
     use rayon::prelude::*;
@@ -342,14 +434,22 @@ fn enclosed_elements(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<bool> 
             let mut rng = crate::rng::Rng::new(crate::rng::hash(seed ^ 0xDEAD, leaf as u64, 0));
             let mut back = 0;
             for k in 0..PROBES {
-                let (u1, u2) = ((f64::from(k % 4) + rng.f64()) / 4.0, (f64::from(k / 4) + rng.f64()) / 4.0);
+                let (u1, u2) = (
+                    (f64::from(k % 4) + rng.f64()) / 4.0,
+                    (f64::from(k / 4) + rng.f64()) / 4.0,
+                );
                 let (r, phi) = (u1.sqrt(), std::f64::consts::TAU * u2);
-                let dir = t * (r * phi.cos()) + b * (r * phi.sin()) + node.normal * (1.0 - u1).max(0.0).sqrt();
-                if vis.closest_hit(node.centroid.as_vec3(), dir.as_vec3(), f32::INFINITY).is_some_and(|h| !h.front) {
+                let dir = t * (r * phi.cos())
+                    + b * (r * phi.sin())
+                    + node.normal * (1.0 - u1).max(0.0).sqrt();
+                if vis
+                    .closest_hit(node.centroid.as_vec3(), dir.as_vec3(), f32::INFINITY)
+                    .is_some_and(|h| !h.front)
+                {
                     back += 1;
                 }
             }
-            back * 2 > PROBES
+            back == PROBES
         })
         .collect()
 }
@@ -373,7 +473,9 @@ fn estimates(mesh: &Mesh, rho: &[Rgb], source: &[Rgb]) -> (Vec<f64>, f64) {
             let i = node.leaf_lo as usize;
             max3(&source[i]) + max3(&rho[i]) * amb
         } else {
-            (0..4).map(|k| bhat[(node.first_child + k) as usize]).fold(0.0, f64::max)
+            (0..4)
+                .map(|k| bhat[(node.first_child + k) as usize])
+                .fold(0.0, f64::max)
         };
     }
     (bhat, amb)

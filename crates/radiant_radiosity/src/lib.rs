@@ -60,7 +60,9 @@ pub enum BakeError {
         limit: usize,
     },
     /// The direct solver's dense matrix would be too large.
-    #[error("the direct solver is limited to {limit} elements ({elements} here): use an iterative method or a larger --patch-size")]
+    #[error(
+        "the direct solver is limited to {limit} elements ({elements} here): use an iterative method or a larger --patch-size"
+    )]
     TooLargeForDirect {
         /// Elements in the system.
         elements: usize,

@@ -76,7 +76,12 @@ pub fn bake_lightmap(mesh: &Mesh, b: &[Rgb], max_width: u32) -> LightMap {
             }
         }
     }
-    LightMap { width, height, texels, charts }
+    LightMap {
+        width,
+        height,
+        texels,
+        charts,
+    }
 }
 
 /// Radiosity at the `(n+1)(n+2)/2` lattice vertices of an input triangle split `n` ways per
@@ -93,8 +98,12 @@ fn vertex_values(mesh: &Mesh, root: u32, n: u32, b: &[Rgb]) -> Vec<Rgb> {
         for v in node.v {
             let p = v - r.v[0];
             let (p1, p2) = (p.dot(e1), p.dot(e2));
-            let u = ((d22 * p1 - d12 * p2) / det * f64::from(n)).round().clamp(0.0, f64::from(n)) as usize;
-            let w = ((d11 * p2 - d12 * p1) / det * f64::from(n)).round().clamp(0.0, f64::from(n)) as usize;
+            let u = ((d22 * p1 - d12 * p2) / det * f64::from(n))
+                .round()
+                .clamp(0.0, f64::from(n)) as usize;
+            let w = ((d11 * p2 - d12 * p1) / det * f64::from(n))
+                .round()
+                .clamp(0.0, f64::from(n)) as usize;
             let slot = &mut acc[w * stride + u];
             for c in 0..3 {
                 slot.0[c] += node.area * b[leaf as usize][c];
@@ -102,5 +111,7 @@ fn vertex_values(mesh: &Mesh, root: u32, n: u32, b: &[Rgb]) -> Vec<Rgb> {
             slot.1 += node.area;
         }
     }
-    acc.into_iter().map(|(s, a)| if a > 0.0 { s.map(|x| x / a) } else { [0.0; 3] }).collect()
+    acc.into_iter()
+        .map(|(s, a)| if a > 0.0 { s.map(|x| x / a) } else { [0.0; 3] })
+        .collect()
 }

@@ -48,7 +48,11 @@ pub fn direct_irradiance(mesh: &Mesh, lights: &[Light], vis: &dyn Visibility) ->
                     }
                 }
             }
-            if let LightKind::Spot { inner_cone_angle, outer_cone_angle } = light.kind {
+            if let LightKind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } = light.kind
+            {
                 let cd = light.direction.dot(-to_light);
                 let (ci, co) = (inner_cone_angle.cos(), outer_cone_angle.cos());
                 let t = ((cd - co) / (ci - co).max(1e-9)).clamp(0.0, 1.0);
@@ -67,4 +71,3 @@ pub fn direct_irradiance(mesh: &Mesh, lights: &[Light], vis: &dyn Visibility) ->
     }
     out
 }
-

@@ -20,18 +20,26 @@ use crate::mesh::Mesh;
 /// Refinement parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LinkParams {
-    /// Split a source while `F × B̂ > refinement × B_ambient` (default: 0.02). Smaller is more
-    /// accurate and slower.
+    /// Below the patch level, split a source while `F × B̂ > refinement × B_ambient`, with `B̂`
+    /// its estimated radiosity (default: 0.02). Smaller is more accurate and slower.
     pub refinement: f64,
     /// Adaptive source hierarchy (true) or every element to every patch (false).
     pub hierarchical: bool,
+    /// Above the patch level, split unless `F × B̂` is below `far_field × refinement ×
+    /// B_ambient` (default: 0.05).
+    pub far_field: f64,
     /// Most visibility samples on one link (default: 16).
     pub max_samples: u8,
 }
 
 impl Default for LinkParams {
     fn default() -> Self {
-        LinkParams { refinement: 0.02, hierarchical: true, max_samples: 16 }
+        LinkParams {
+            refinement: 0.02,
+            hierarchical: true,
+            far_field: 0.05,
+            max_samples: 16,
+        }
     }
 }
 
@@ -61,23 +69,33 @@ impl Links {
     }
     /// Sum of the form factors of element `i`'s row.
     pub fn row_sum(&self, i: usize) -> f64 {
-        self.ff[self.row[i]..self.row[i + 1]].iter().map(|&f| f64::from(f)).sum()
+        self.ff[self.row[i]..self.row[i + 1]]
+            .iter()
+            .map(|&f| f64::from(f))
+            .sum()
     }
 }
 
-/// Builds all links. `bhat[node]` estimates each node's radiosity (max channel), and
-/// `b_ambient` the scene's mean; `progress(done)` is called with elements done so far.
+/// The refinement oracle: split a source node while `F × bhat[node] > eps` (or, above the patch
+/// level, while it exceeds `far_field × eps`).
+#[derive(Clone, Copy, Debug)]
+pub struct Oracle<'a> {
+    /// A-priori radiosity estimate per node (max channel).
+    pub bhat: &'a [f64],
+    /// Absolute threshold on `F × B̂`.
+    pub eps: f64,
+}
+
+/// Builds all links; `progress(done)` is called with the elements done so far.
 pub fn build(
     ctx: &FfContext,
     method: &dyn FormFactorMethod,
-    bhat: &[f64],
-    b_ambient: f64,
+    oracle: Oracle,
     params: &LinkParams,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Links {
     let mesh = ctx.mesh;
     let n = mesh.element_count();
-    let eps = (params.refinement.max(1e-9) * b_ambient).max(f64::MIN_POSITIVE);
     let done = AtomicUsize::new(0);
     const CHUNK: usize = 64;
     let chunks: Vec<(Vec<u32>, Vec<u32>, Vec<f32>)> = (0..n.div_ceil(CHUNK))
@@ -94,10 +112,24 @@ pub fn build(
                 row_src.clear();
                 row_f.clear();
                 row_s.clear();
-                refine(mesh, leaf as u32, bhat, eps, params, &mut stack, &mut row_src, &mut row_f, &mut row_s);
+                refine(
+                    mesh,
+                    leaf as u32,
+                    oracle,
+                    params,
+                    &mut stack,
+                    &mut row_src,
+                    &mut row_f,
+                    &mut row_s,
+                );
                 out.clear();
                 out.resize(row_src.len(), 0.0f32);
-                let row = Row { leaf: leaf as u32, sources: &row_src, unoccluded: &row_f, samples: &row_s };
+                let row = Row {
+                    leaf: leaf as u32,
+                    sources: &row_src,
+                    unoccluded: &row_f,
+                    samples: &row_s,
+                };
                 method.compute(ctx, &row, &mut out);
                 // Drop links that carry nothing (fully occluded).
                 let before = src.len();
@@ -115,7 +147,11 @@ pub fn build(
         })
         .collect();
     let total: usize = chunks.iter().map(|c| c.1.len()).sum();
-    let mut links = Links { row: Vec::with_capacity(n + 1), src: Vec::with_capacity(total), ff: Vec::with_capacity(total) };
+    let mut links = Links {
+        row: Vec::with_capacity(n + 1),
+        src: Vec::with_capacity(total),
+        ff: Vec::with_capacity(total),
+    };
     links.row.push(0);
     for (counts, src, ff) in chunks {
         let mut at = links.src.len();
@@ -133,8 +169,7 @@ pub fn build(
 fn refine(
     mesh: &Mesh,
     leaf: u32,
-    bhat: &[f64],
-    eps: f64,
+    oracle: Oracle,
     params: &LinkParams,
     stack: &mut Vec<u32>,
     src: &mut Vec<u32>,
@@ -143,6 +178,15 @@ fn refine(
 ) {
     let r = mesh.leaf_node(leaf);
     let (x, n) = (r.centroid, r.normal);
+    let max_samples = f64::from(params.max_samples.max(1));
+    let samples_for = |transport: f64, eps: f64| -> u8 {
+        let want = (transport / eps).ceil();
+        if want.is_finite() {
+            want.clamp(1.0, max_samples) as u8
+        } else {
+            1
+        }
+    };
     stack.clear();
     stack.extend(mesh.roots.iter().rev().copied());
     while let Some(s) = stack.pop() {
@@ -154,12 +198,17 @@ fn refine(
         if f <= 0.0 {
             continue;
         }
-        let transport = f * bhat[s as usize];
-        let split = if params.hierarchical {
-            !node.is_leaf() && transport > eps
-        } else {
-            node.depth < mesh.patch_depth[node.root as usize] && !node.is_leaf()
-        };
+        let t = f * oracle.bhat[s as usize];
+        let above_patch = node.depth < mesh.patch_depth[node.root as usize];
+        let split = !node.is_leaf()
+            && if params.hierarchical {
+                // Sources are never coarser than patches unless they carry next to nothing;
+                // below patches they are split while the transport is large.
+                (above_patch && t > oracle.eps * params.far_field) || t > oracle.eps
+            } else {
+                above_patch
+            };
+        let nsamples = samples_for(t, oracle.eps);
         if split {
             for k in (0..4).rev() {
                 stack.push(node.first_child + k);
@@ -167,8 +216,7 @@ fn refine(
         } else {
             src.push(s);
             fs.push(f);
-            let want = (transport / eps).ceil();
-            samples.push(if want.is_finite() { want.clamp(1.0, f64::from(params.max_samples.max(1))) as u8 } else { 1 });
+            samples.push(nsamples);
         }
     }
 }

@@ -70,17 +70,23 @@ impl Node {
 /// Meshing parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MeshParams {
-    /// Target longest edge of a patch, in scene (world) units.
+    /// Target longest edge of a patch, in scene (world) units; 0 picks a quarter of the
+    /// scene's extent (default: 0).
     pub patch_size: f64,
-    /// Levels of subdivision from patches down to elements (each level splits a triangle in 4).
+    /// Levels of subdivision from patches down to elements; each level splits a triangle in 4
+    /// (default: 2).
     pub element_levels: u8,
-    /// Refuse meshes with more elements than this.
+    /// Refuse meshes with more elements than this (default: 4 000 000).
     pub max_elements: usize,
 }
 
 impl Default for MeshParams {
     fn default() -> Self {
-        MeshParams { patch_size: 0.0, element_levels: 1, max_elements: 4_000_000 }
+        MeshParams {
+            patch_size: 0.0,
+            element_levels: 2,
+            max_elements: 4_000_000,
+        }
     }
 }
 
@@ -104,13 +110,13 @@ pub struct Mesh {
 }
 
 impl Mesh {
-    /// Meshes the scene. `params.patch_size <= 0` picks `extent / 24`.
+    /// Meshes the scene. `params.patch_size == 0` picks a quarter of the scene's extent.
     pub fn new(scene: &Scene, params: &MeshParams) -> Result<Mesh, BakeError> {
         let frame = frame_of(scene)?;
         let patch_size = if params.patch_size > 0.0 && params.patch_size.is_finite() {
             params.patch_size / frame.scale
         } else if params.patch_size == 0.0 {
-            1.0 / 24.0
+            0.25
         } else {
             return Err(BakeError::InvalidParameter(format!(
                 "patch size {} must be positive",
@@ -122,7 +128,10 @@ impl Mesh {
         let mut total: usize = 0;
         for t in &scene.triangles {
             let v = t.vertices.map(|p| frame.to_local(p));
-            let longest = (v[1] - v[0]).length().max((v[2] - v[1]).length()).max((v[0] - v[2]).length());
+            let longest = (v[1] - v[0])
+                .length()
+                .max((v[2] - v[1]).length())
+                .max((v[0] - v[2]).length());
             let mut pd = 0u8;
             while longest / f64::from(1u32 << pd) > patch_size && pd < 14 {
                 pd += 1;
@@ -132,7 +141,10 @@ impl Mesh {
             plan.push((v, pd, ld));
         }
         if total > params.max_elements {
-            return Err(BakeError::TooManyElements { elements: total, limit: params.max_elements });
+            return Err(BakeError::TooManyElements {
+                elements: total,
+                limit: params.max_elements,
+            });
         }
         let mut mesh = Mesh {
             frame,
@@ -258,7 +270,10 @@ fn frame_of(scene: &Scene) -> Result<Frame, BakeError> {
     if !(scale > 0.0 && scale.is_finite()) {
         return Err(BakeError::InvalidScene("the scene has zero extent".into()));
     }
-    Ok(Frame { center: (lo + hi) * 0.5, scale })
+    Ok(Frame {
+        center: (lo + hi) * 0.5,
+        scale,
+    })
 }
 
 #[cfg(test)]
@@ -268,10 +283,19 @@ mod tests {
     #[test]
     fn leaves_tile_each_root_and_locate_finds_them() {
         let scene = radiant_scene::builtin("cornell-box").expect("builtin");
-        let mesh = Mesh::new(&scene, &MeshParams { patch_size: 0.2, ..Default::default() }).expect("mesh");
+        let mesh = Mesh::new(
+            &scene,
+            &MeshParams {
+                patch_size: 0.2,
+                ..Default::default()
+            },
+        )
+        .expect("mesh");
         for &r in &mesh.roots {
             let root = mesh.nodes[r as usize];
-            let sum: f64 = (root.leaf_lo..root.leaf_hi).map(|l| mesh.leaf_node(l).area).sum();
+            let sum: f64 = (root.leaf_lo..root.leaf_hi)
+                .map(|l| mesh.leaf_node(l).area)
+                .sum();
             assert!((sum - root.area).abs() < 1e-12 * root.area.max(1.0));
         }
         // Every leaf's centroid locates to itself.
@@ -279,7 +303,11 @@ mod tests {
             let n = mesh.nodes[id as usize];
             let root = mesh.nodes[mesh.roots[n.root as usize] as usize];
             // Barycentrics of the centroid on the root triangle.
-            let (e1, e2, p) = (root.v[1] - root.v[0], root.v[2] - root.v[0], n.centroid - root.v[0]);
+            let (e1, e2, p) = (
+                root.v[1] - root.v[0],
+                root.v[2] - root.v[0],
+                n.centroid - root.v[0],
+            );
             let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
             let (p1, p2) = (p.dot(e1), p.dot(e2));
             let det = d11 * d22 - d12 * d12;
@@ -293,11 +321,24 @@ mod tests {
     fn bad_patch_size_and_budget_are_errors() {
         let scene = radiant_scene::builtin("cornell-box").expect("builtin");
         assert!(matches!(
-            Mesh::new(&scene, &MeshParams { patch_size: -1.0, ..Default::default() }),
+            Mesh::new(
+                &scene,
+                &MeshParams {
+                    patch_size: -1.0,
+                    ..Default::default()
+                }
+            ),
             Err(BakeError::InvalidParameter(_))
         ));
         assert!(matches!(
-            Mesh::new(&scene, &MeshParams { patch_size: 1e-4, max_elements: 1000, ..Default::default() }),
+            Mesh::new(
+                &scene,
+                &MeshParams {
+                    patch_size: 1e-4,
+                    max_elements: 1000,
+                    ..Default::default()
+                }
+            ),
             Err(BakeError::TooManyElements { .. })
         ));
     }

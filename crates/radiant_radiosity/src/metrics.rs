@@ -11,9 +11,9 @@
 
 use radiant_scene::Surface;
 
+use crate::BakeError;
 use crate::mesh::Mesh;
 use crate::system::Rgb;
-use crate::BakeError;
 
 /// Area-weighted mean radiosity of one surface.
 #[derive(Clone, Debug, PartialEq)]
@@ -88,14 +88,24 @@ fn stats<'a>(items: impl Iterator<Item = (f64, &'a Rgb, &'a Rgb)>, floor: f64) -
 
 /// Errors of per-surface means against a per-surface reference, emitters excluded. Surfaces
 /// missing from the reference are skipped; it is an error if none match.
-pub fn compare_surfaces(got: &[SurfaceMean], reference: &[(String, Rgb)]) -> Result<ErrorStats, BakeError> {
+pub fn compare_surfaces(
+    got: &[SurfaceMean],
+    reference: &[(String, Rgb)],
+) -> Result<ErrorStats, BakeError> {
     let pairs: Vec<(f64, &Rgb, &Rgb)> = got
         .iter()
         .filter(|s| !s.emitter)
-        .filter_map(|s| reference.iter().find(|(n, _)| *n == s.name).map(|(_, r)| (s.area, &s.mean, r)))
+        .filter_map(|s| {
+            reference
+                .iter()
+                .find(|(n, _)| *n == s.name)
+                .map(|(_, r)| (s.area, &s.mean, r))
+        })
         .collect();
     if pairs.is_empty() {
-        return Err(BakeError::Reference("no surface of the scene is in the reference".into()));
+        return Err(BakeError::Reference(
+            "no surface of the scene is in the reference".into(),
+        ));
     }
     Ok(stats(pairs.into_iter(), 1e-12))
 }
@@ -110,7 +120,10 @@ pub fn compare_elements(area: &[f64], got: &[Rgb], reference: &[Rgb]) -> ErrorSt
         .sum::<f64>()
         / total.max(f64::MIN_POSITIVE);
     stats(
-        area.iter().zip(got).zip(reference).map(|((a, b), r)| (*a, b, r)),
+        area.iter()
+            .zip(got)
+            .zip(reference)
+            .map(|((a, b), r)| (*a, b, r)),
         (1e-3 * mean_r).max(f64::MIN_POSITIVE),
     )
 }
@@ -119,7 +132,10 @@ pub fn compare_elements(area: &[f64], got: &[Rgb], reference: &[Rgb]) -> ErrorSt
 /// - ours (`surfaces.csv`): `surface,area,b_r,b_g,b_b`;
 /// - Mitsuba irradiance meters (`quad,...,B_r,B_g,B_b,...`): `B` is exitance, divided by π.
 pub fn parse_reference_csv(text: &str) -> Result<Vec<(String, Rgb)>, BakeError> {
-    let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty() && !l.starts_with('#'));
+    let mut lines = text
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with('#'));
     let header: Vec<&str> = lines
         .next()
         .ok_or_else(|| BakeError::Reference("empty reference file".into()))?
@@ -131,9 +147,18 @@ pub fn parse_reference_csv(text: &str) -> Result<Vec<(String, Rgb)>, BakeError> 
         // Mitsuba's columns are upper case B_r; ours lower case b_r: tell them apart by the
         // first column's name.
         let mitsuba = header.first().is_some_and(|h| *h == "quad");
-        ([r, g, b], if mitsuba { 1.0 / std::f64::consts::PI } else { 1.0 })
+        (
+            [r, g, b],
+            if mitsuba {
+                1.0 / std::f64::consts::PI
+            } else {
+                1.0
+            },
+        )
     } else {
-        return Err(BakeError::Reference("header needs b_r,b_g,b_b (ours) or B_r,B_g,B_b (Mitsuba)".into()));
+        return Err(BakeError::Reference(
+            "header needs b_r,b_g,b_b (ours) or B_r,B_g,B_b (Mitsuba)".into(),
+        ));
     };
     let mut out = Vec::new();
     for (k, line) in lines.enumerate() {
@@ -142,10 +167,22 @@ pub fn parse_reference_csv(text: &str) -> Result<Vec<(String, Rgb)>, BakeError> 
             f.get(i)
                 .and_then(|s| s.parse::<f64>().ok())
                 .filter(|v| v.is_finite())
-                .ok_or_else(|| BakeError::Reference(format!("row {}: bad number in column {}", k + 2, i + 1)))
+                .ok_or_else(|| {
+                    BakeError::Reference(format!("row {}: bad number in column {}", k + 2, i + 1))
+                })
         };
-        let name = f.first().filter(|s| !s.is_empty()).ok_or_else(|| BakeError::Reference(format!("row {}: no surface name", k + 2)))?;
-        out.push((name.to_string(), [get(cols[0])? * scale, get(cols[1])? * scale, get(cols[2])? * scale]));
+        let name = f
+            .first()
+            .filter(|s| !s.is_empty())
+            .ok_or_else(|| BakeError::Reference(format!("row {}: no surface name", k + 2)))?;
+        out.push((
+            name.to_string(),
+            [
+                get(cols[0])? * scale,
+                get(cols[1])? * scale,
+                get(cols[2])? * scale,
+            ],
+        ));
     }
     if out.is_empty() {
         return Err(BakeError::Reference("no rows".into()));
@@ -155,4 +192,5 @@ pub fn parse_reference_csv(text: &str) -> Result<Vec<(String, Rgb)>, BakeError> 
 
 /// The Mitsuba 3 reference for the builtin Cornell box: irradiance meters on each quad,
 /// 2^25 samples per pixel, `llvm_ad_rgb`, unbounded depth (`assets/reference/`).
-pub const CORNELL_BOX_REFERENCE: &str = include_str!("../../../assets/reference/cornell_box_mitsuba_irradiance.csv");
+pub const CORNELL_BOX_REFERENCE: &str =
+    include_str!("../../../assets/reference/cornell_box_mitsuba_irradiance.csv");

@@ -13,7 +13,14 @@ pub fn box_triangles(lo: DVec3, hi: DVec3, inward: bool) -> Vec<[DVec3; 3]> {
         )
     };
     // Each face as a quad, counter-clockwise seen from outside.
-    let faces = [[0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 5, 4], [2, 6, 7, 3], [0, 2, 3, 1], [4, 5, 7, 6]];
+    let faces = [
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+    ];
     let mut out = Vec::new();
     for f in faces {
         let q = f.map(c);
@@ -32,10 +39,26 @@ pub fn quad(origin: DVec3, u: DVec3, v: DVec3) -> [[DVec3; 3]; 2] {
 }
 
 /// Adds a surface with the given triangles to a scene.
-pub fn add_surface(scene: &mut Scene, name: &str, rho: [f64; 3], emission: [f64; 3], tris: &[[DVec3; 3]]) -> u32 {
+pub fn add_surface(
+    scene: &mut Scene,
+    name: &str,
+    rho: [f64; 3],
+    emission: [f64; 3],
+    tris: &[[DVec3; 3]],
+) -> u32 {
     let id = scene.surfaces.len() as u32;
-    scene.surfaces.push(Surface { name: name.into(), material: name.into(), reflectance: rho, emission });
-    scene.triangles.extend(tris.iter().map(|&vertices| Triangle { vertices, surface: id }));
+    scene.surfaces.push(Surface {
+        name: name.into(),
+        material: name.into(),
+        reflectance: rho,
+        emission,
+    });
+    scene
+        .triangles
+        .extend(tris.iter().map(|&vertices| Triangle {
+            vertices,
+            surface: id,
+        }));
     id
 }
 
@@ -43,6 +66,12 @@ pub fn add_surface(scene: &mut Scene, name: &str, rho: [f64; 3], emission: [f64;
 /// The exact radiosity is `e / (1 − ρ)` everywhere.
 pub fn furnace(rho: f64, e: f64) -> Scene {
     let mut s = Scene::default();
-    add_surface(&mut s, "walls", [rho; 3], [e; 3], &box_triangles(DVec3::ZERO, DVec3::ONE, true));
+    add_surface(
+        &mut s,
+        "walls",
+        [rho; 3],
+        [e; 3],
+        &box_triangles(DVec3::ZERO, DVec3::ONE, true),
+    );
     s
 }

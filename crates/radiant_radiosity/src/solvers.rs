@@ -34,7 +34,12 @@ pub enum SolverKind {
 
 impl SolverKind {
     /// All solvers, in report order.
-    pub const ALL: [SolverKind; 4] = [Self::Jacobi, Self::GaussSeidel, Self::Southwell, Self::Direct];
+    pub const ALL: [SolverKind; 4] = [
+        Self::Jacobi,
+        Self::GaussSeidel,
+        Self::Southwell,
+        Self::Direct,
+    ];
 
     /// The CLI name.
     pub fn name(self) -> &'static str {
@@ -59,7 +64,9 @@ impl SolverKind {
 /// Solver parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SolverParams {
-    /// Converged when the relative residual falls to this (default: 1e-4).
+    /// Converged when the estimated relative error, the relative residual divided by
+    /// `1 − ρ̂` ([`System::contraction`]), falls to this (default: 1e-4). Dividing by `1 − ρ̂`
+    /// keeps stiff scenes (reflectance near 1) from stopping early.
     pub tolerance: f64,
     /// Southwell: overshoot by the expected ambient (default: true).
     pub overshoot: bool,
@@ -71,7 +78,12 @@ pub struct SolverParams {
 
 impl Default for SolverParams {
     fn default() -> Self {
-        SolverParams { tolerance: 1e-4, overshoot: true, ambient: true, max_direct: 4096 }
+        SolverParams {
+            tolerance: 1e-4,
+            overshoot: true,
+            ambient: true,
+            max_direct: 4096,
+        }
     }
 }
 
@@ -109,15 +121,41 @@ pub fn new_solver(kind: SolverKind, sys: &System, params: SolverParams) -> Box<d
 }
 
 fn l1(sys: &System, v: &[Rgb]) -> f64 {
-    v.iter().zip(&sys.area).map(|(x, a)| a * (x[0].abs() + x[1].abs() + x[2].abs())).sum()
+    v.iter()
+        .zip(&sys.area)
+        .map(|(x, a)| a * (x[0].abs() + x[1].abs() + x[2].abs()))
+        .sum()
 }
 
-fn progress_from_residual(sys: &System, b: &[Rgb], r: &[Rgb], iterations: u64, tol: f64) -> Progress {
+/// The residual threshold that meets an error tolerance: `tol × (1 − ρ̂)`.
+fn residual_target(sys: &System, tol: f64) -> f64 {
+    tol * (1.0 - sys.contraction()).clamp(1e-9, 1.0)
+}
+
+fn progress_from_residual(
+    sys: &System,
+    b: &[Rgb],
+    r: &[Rgb],
+    iterations: u64,
+    tol: f64,
+) -> Progress {
+    let tol = residual_target(sys, tol);
     let (rn, bn) = (sys.norm(r), sys.norm(b));
-    let residual = if bn > 0.0 { rn / bn } else if rn > 0.0 { f64::INFINITY } else { 0.0 };
+    let residual = if bn > 0.0 {
+        rn / bn
+    } else if rn > 0.0 {
+        f64::INFINITY
+    } else {
+        0.0
+    };
     let sp = sys.source_power();
     let unshot_fraction = if sp > 0.0 { l1(sys, r) / sp } else { 0.0 };
-    Progress { iterations, residual, unshot_fraction, converged: residual <= tol }
+    Progress {
+        iterations,
+        residual,
+        unshot_fraction,
+        converged: residual <= tol,
+    }
 }
 
 /// Jacobi iteration.
@@ -131,7 +169,12 @@ pub struct Jacobi {
 impl Jacobi {
     /// Starts from `B = S`.
     pub fn new(sys: &System, params: SolverParams) -> Self {
-        Jacobi { b: sys.source.clone(), nodes: vec![[0.0; 3]; sys.node_area.len()], iterations: 0, params }
+        Jacobi {
+            b: sys.source.clone(),
+            nodes: vec![[0.0; 3]; sys.node_area.len()],
+            iterations: 0,
+            params,
+        }
     }
 }
 
@@ -152,8 +195,18 @@ impl Solver for Jacobi {
                 })
                 .collect();
             // The change is exactly the residual of the previous iterate.
-            let r: Vec<Rgb> = next.iter().zip(&self.b).map(|(n, o)| std::array::from_fn(|c| n[c] - o[c])).collect();
-            let p = progress_from_residual(sys, &self.b, &r, self.iterations + 1, self.params.tolerance);
+            let r: Vec<Rgb> = next
+                .iter()
+                .zip(&self.b)
+                .map(|(n, o)| std::array::from_fn(|c| n[c] - o[c]))
+                .collect();
+            let p = progress_from_residual(
+                sys,
+                &self.b,
+                &r,
+                self.iterations + 1,
+                self.params.tolerance,
+            );
             self.b = next;
             self.iterations += 1;
             if p.converged || start.elapsed() >= budget || !p.residual.is_finite() {
@@ -177,7 +230,12 @@ pub struct GaussSeidel {
 impl GaussSeidel {
     /// Starts from `B = S`.
     pub fn new(sys: &System, params: SolverParams) -> Self {
-        GaussSeidel { b: sys.source.clone(), nodes: vec![[0.0; 3]; sys.node_area.len()], iterations: 0, params }
+        GaussSeidel {
+            b: sys.source.clone(),
+            nodes: vec![[0.0; 3]; sys.node_area.len()],
+            iterations: 0,
+            params,
+        }
     }
 }
 
@@ -213,14 +271,26 @@ impl Solver for GaussSeidel {
             // Check convergence every few sweeps within a long budget.
             if self.iterations % 4 == 0 {
                 let r = sys.residual(&self.b);
-                let p = progress_from_residual(sys, &self.b, &r, self.iterations, self.params.tolerance);
+                let p = progress_from_residual(
+                    sys,
+                    &self.b,
+                    &r,
+                    self.iterations,
+                    self.params.tolerance,
+                );
                 if p.converged || !p.residual.is_finite() {
                     return Ok(p);
                 }
             }
         }
         let r = sys.residual(&self.b);
-        Ok(progress_from_residual(sys, &self.b, &r, self.iterations, self.params.tolerance))
+        Ok(progress_from_residual(
+            sys,
+            &self.b,
+            &r,
+            self.iterations,
+            self.params.tolerance,
+        ))
     }
     fn radiosity(&self, _sys: &System) -> Vec<Rgb> {
         self.b.clone()
@@ -278,7 +348,8 @@ impl Southwell {
         let mut power = vec![0.0; sys.root_nodes.len()];
         for i in 0..sys.len() {
             let s = &sys.source[i];
-            power[sys.leaf_root[i] as usize] += sys.area[i] * (s[0].abs() + s[1].abs() + s[2].abs());
+            power[sys.leaf_root[i] as usize] +=
+                sys.weight[i] * (s[0].abs() + s[1].abs() + s[2].abs());
         }
         Southwell {
             b: sys.source.clone(),
@@ -300,7 +371,7 @@ impl Southwell {
     /// Cohen et al.'s ambient: the unshot energy, spread evenly and reflected `1/(1−ρ̄)` times.
     fn ambient(&self, sys: &System) -> Rgb {
         let mut a = [0.0; 3];
-        for (u, ar) in self.unshot.iter().zip(&sys.area) {
+        for (u, ar) in self.unshot.iter().zip(&sys.weight) {
             for c in 0..3 {
                 a[c] += u[c] * ar;
             }
@@ -308,17 +379,41 @@ impl Southwell {
         std::array::from_fn(|c| a[c] / self.total_area / (1.0 - self.mean_rho[c].min(0.999_999)))
     }
 
+    fn recount_power(&mut self, sys: &System) {
+        self.power.iter_mut().for_each(|p| *p = 0.0);
+        for (i, u) in self.unshot.iter().enumerate() {
+            self.power[sys.leaf_root[i] as usize] +=
+                sys.weight[i] * (u[0].abs() + u[1].abs() + u[2].abs());
+        }
+    }
+
     fn shoot(&mut self, sys: &System, root: usize) {
         let (lo, hi) = sys.root_nodes[root];
-        let (llo, lhi) = (sys.node_leaf_lo[lo as usize] as usize, sys.node_leaf_hi[lo as usize] as usize);
+        let (llo, lhi) = (
+            sys.node_leaf_lo[lo as usize] as usize,
+            sys.node_leaf_hi[lo as usize] as usize,
+        );
         // What each element shoots: its unshot radiosity, plus the overshoot.
-        let amb = if self.params.overshoot { self.ambient(sys) } else { [0.0; 3] };
+        let amb = if self.params.overshoot {
+            self.ambient(sys)
+        } else {
+            [0.0; 3]
+        };
         let mut shot = vec![[0.0; 3]; lhi - llo];
         for (k, i) in (llo..lhi).enumerate() {
-            let over: Rgb = std::array::from_fn(|c| sys.rho[i][c] * amb[c].max(0.0));
+            // Overshoot (Feda & Purgathofer 1992) only what is positive and seen by others: a
+            // negative residual is shot as it is, or it would be overshot back to where it was.
+            let over: Rgb = std::array::from_fn(|c| {
+                if self.unshot[i][c] > 0.0 && sys.weight[i] > 0.0 {
+                    sys.rho[i][c] * amb[c].max(0.0)
+                } else {
+                    0.0
+                }
+            });
             shot[k] = std::array::from_fn(|c| self.unshot[i][c] + over[c]);
+            // Relaxing by more than the residual leaves a negative residual; the displayed
+            // estimate (relaxed plus unshot) does not change.
             for c in 0..3 {
-                self.b[i][c] += over[c];
                 self.unshot[i][c] = -over[c];
             }
         }
@@ -352,13 +447,13 @@ impl Southwell {
         let mut pw_root = 0.0;
         for i in llo..lhi {
             let u = &self.unshot[i];
-            pw_root += sys.area[i] * (u[0].abs() + u[1].abs() + u[2].abs());
+            pw_root += sys.weight[i] * (u[0].abs() + u[1].abs() + u[2].abs());
         }
         self.power[root] = pw_root;
         for &i in &self.touched {
             let i = i as usize;
             let g = std::mem::replace(&mut self.gathered[i], [0.0; 3]);
-            let a = sys.area[i];
+            let a = sys.weight[i];
             let old = self.unshot[i];
             for c in 0..3 {
                 let d = sys.rho[i][c] * g[c];
@@ -367,7 +462,9 @@ impl Southwell {
             }
             let new = self.unshot[i];
             let r = sys.leaf_root[i] as usize;
-            self.power[r] += a * ((new[0].abs() + new[1].abs() + new[2].abs()) - (old[0].abs() + old[1].abs() + old[2].abs()));
+            self.power[r] += a
+                * ((new[0].abs() + new[1].abs() + new[2].abs())
+                    - (old[0].abs() + old[1].abs() + old[2].abs()));
         }
         self.touched.clear();
         self.shots += 1;
@@ -381,11 +478,21 @@ impl Solver for Southwell {
     fn step(&mut self, sys: &System, budget: Duration) -> Result<Progress, BakeError> {
         let start = Instant::now();
         let sp = sys.source_power();
+        let tol = residual_target(sys, self.params.tolerance);
+        // At least one shot per step, however small the budget.
+        let mut shot = false;
         loop {
-            let total: f64 = self.power.iter().sum();
+            let mut total: f64 = self.power.iter().sum();
+            let mut done = total <= tol * sp;
+            if done {
+                // The per-root powers are updated incrementally; before stopping, recount them
+                // exactly so that rounding cannot fake convergence.
+                self.recount_power(sys);
+                total = self.power.iter().sum();
+                done = total <= tol * sp;
+            }
             let unshot_fraction = if sp > 0.0 { total / sp } else { 0.0 };
-            let done = unshot_fraction <= self.params.tolerance || total <= 0.0;
-            if done || start.elapsed() >= budget {
+            if done || (shot && start.elapsed() >= budget) {
                 let rn = sys.norm(&self.unshot);
                 let bn = sys.norm(&self.b);
                 let residual = if bn > 0.0 { rn / bn } else { 0.0 };
@@ -393,7 +500,7 @@ impl Solver for Southwell {
                     iterations: self.shots,
                     residual,
                     unshot_fraction,
-                    converged: done && residual <= self.params.tolerance.max(unshot_fraction),
+                    converged: done,
                 });
             }
             let mut best = 0;
@@ -403,13 +510,15 @@ impl Solver for Southwell {
                 }
             }
             self.shoot(sys, best);
+            shot = true;
         }
     }
     fn radiosity(&self, sys: &System) -> Vec<Rgb> {
         if !self.params.ambient {
             return self.b.clone();
         }
-        let amb = self.ambient(sys);
+        // Overshooting can make the unshot sum negative; the display never subtracts.
+        let amb = self.ambient(sys).map(|a| a.max(0.0));
         self.b
             .iter()
             .zip(&sys.rho)
@@ -453,18 +562,28 @@ impl Direct {
         use faer::prelude::*;
         let n = sys.len();
         if n > self.params.max_direct {
-            return Err(BakeError::TooLargeForDirect { elements: n, limit: self.params.max_direct });
+            return Err(BakeError::TooLargeForDirect {
+                elements: n,
+                limit: self.params.max_direct,
+            });
         }
         let k = Self::dense_k(sys);
         let mut out = vec![[0.0; 3]; n];
         let mut done = [false; 3];
+        // With all inputs non-negative the exact solution is non-negative, (I − ρK)⁻¹ being the
+        // Neumann series Σ (ρK)ⁿ. A solution with clearly negative values or a large residual
+        // means the matrix is singular to working precision (reflectance 1 in a closed scene).
         for c in 0..3 {
             if done[c] {
                 continue;
             }
             // Channels with the same reflectance everywhere share one factorisation.
-            let same: Vec<usize> = (c..3).filter(|&d| !done[d] && sys.rho.iter().all(|r| r[d] == r[c])).collect();
-            let a = Mat::<f64>::from_fn(n, n, |i, j| f64::from(u8::from(i == j)) - sys.rho[i][c] * k[i * n + j]);
+            let same: Vec<usize> = (c..3)
+                .filter(|&d| !done[d] && sys.rho.iter().all(|r| r[d] == r[c]))
+                .collect();
+            let a = Mat::<f64>::from_fn(n, n, |i, j| {
+                f64::from(u8::from(i == j)) - sys.rho[i][c] * k[i * n + j]
+            });
             let rhs = Mat::<f64>::from_fn(n, same.len(), |i, j| sys.source[i][same[j]]);
             let x = a.partial_piv_lu().solve(&rhs);
             for (j, &d) in same.iter().enumerate() {
@@ -477,6 +596,14 @@ impl Direct {
                 }
                 done[d] = true;
             }
+        }
+        let peak = out.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+        if out.iter().flatten().any(|&v| v < -1e-9 * peak) {
+            return Err(BakeError::Singular);
+        }
+        let residual = sys.relative_residual(&out);
+        if !(residual <= 1e-6) {
+            return Err(BakeError::Singular);
         }
         Ok(out)
     }

@@ -40,11 +40,18 @@ pub struct System {
     pub leaf_root: Vec<u32>,
     /// The links.
     pub links: Links,
+    contraction: f64,
 }
 
 impl System {
     /// Assembles the system from the mesh, per-element reflectance and source, and links.
-    pub fn new(mesh: &Mesh, rho: Vec<Rgb>, source: Vec<Rgb>, links: Links, dead: &[bool]) -> System {
+    pub fn new(
+        mesh: &Mesh,
+        rho: Vec<Rgb>,
+        source: Vec<Rgb>,
+        links: Links,
+        dead: &[bool],
+    ) -> System {
         let weight: Vec<f64> = mesh
             .leaves
             .iter()
@@ -56,16 +63,27 @@ impl System {
             node_weight[i] = if n.is_leaf() {
                 weight[n.leaf_lo as usize]
             } else {
-                (0..4).map(|k| node_weight[(n.first_child + k) as usize]).sum()
+                (0..4)
+                    .map(|k| node_weight[(n.first_child + k) as usize])
+                    .sum()
             };
         }
         let mut root_nodes = Vec::with_capacity(mesh.roots.len());
         for (k, &r) in mesh.roots.iter().enumerate() {
-            let end = mesh.roots.get(k + 1).copied().unwrap_or(mesh.nodes.len() as u32);
+            let end = mesh
+                .roots
+                .get(k + 1)
+                .copied()
+                .unwrap_or(mesh.nodes.len() as u32);
             root_nodes.push((r, end));
         }
-        System {
-            area: mesh.leaves.iter().map(|&n| mesh.nodes[n as usize].area).collect(),
+        let mut sys = System {
+            contraction: 0.0,
+            area: mesh
+                .leaves
+                .iter()
+                .map(|&n| mesh.nodes[n as usize].area)
+                .collect(),
             weight,
             node_weight,
             rho,
@@ -77,9 +95,70 @@ impl System {
             node_leaf_hi: mesh.nodes.iter().map(|n| n.leaf_hi).collect(),
             leaf_node: mesh.leaves.clone(),
             root_nodes,
-            leaf_root: mesh.leaves.iter().map(|&n| mesh.nodes[n as usize].root).collect(),
+            leaf_root: mesh
+                .leaves
+                .iter()
+                .map(|&n| mesh.nodes[n as usize].root)
+                .collect(),
             links,
+        };
+        sys.contraction = sys.compute_contraction();
+        sys
+    }
+
+    /// A system given by an explicit form-factor matrix `f[i][j]` (gathering: `B_i = S_i +
+    /// ρ_i Σ_j f[i][j] B_j`), every element its own source node. For textbook examples and tests.
+    pub fn from_matrix(area: Vec<f64>, rho: Vec<Rgb>, source: Vec<Rgb>, f: &[Vec<f64>]) -> System {
+        let n = area.len();
+        let mut links = Links {
+            row: vec![0],
+            src: Vec::new(),
+            ff: Vec::new(),
+        };
+        for row in f {
+            for (j, &v) in row.iter().enumerate() {
+                if v != 0.0 {
+                    links.src.push(j as u32);
+                    links.ff.push(v as f32);
+                }
+            }
+            links.row.push(links.src.len());
         }
+        let ids: Vec<u32> = (0..n as u32).collect();
+        let mut sys = System {
+            contraction: 0.0,
+            weight: area.clone(),
+            node_weight: area.clone(),
+            node_area: area.clone(),
+            area,
+            rho,
+            source,
+            node_parent: vec![u32::MAX; n],
+            node_first_child: vec![u32::MAX; n],
+            node_leaf_lo: ids.clone(),
+            node_leaf_hi: ids.iter().map(|i| i + 1).collect(),
+            leaf_node: ids.clone(),
+            root_nodes: ids.iter().map(|&i| (i, i + 1)).collect(),
+            leaf_root: ids,
+            links,
+        };
+        sys.contraction = sys.compute_contraction();
+        sys
+    }
+
+    /// An upper bound on the spectral radius of `diag(ρ) K`: the largest `ρ × row sum`. The
+    /// error of an iterate is at most its residual divided by `1 −` this.
+    pub fn contraction(&self) -> f64 {
+        self.contraction
+    }
+
+    fn compute_contraction(&self) -> f64 {
+        (0..self.len())
+            .map(|i| {
+                let r = self.rho[i][0].max(self.rho[i][1]).max(self.rho[i][2]);
+                r * self.links.row_sum(i)
+            })
+            .fold(0.0, f64::max)
     }
 
     /// Number of elements.
@@ -99,7 +178,12 @@ impl System {
             let n = n as usize;
             let fc = self.node_first_child[n];
             node_values[n] = if fc == u32::MAX {
-                leaf_values[self.node_leaf_lo[n] as usize]
+                // An element inside closed geometry is seen by nobody: it adds nothing.
+                if self.node_weight[n] > 0.0 {
+                    leaf_values[self.node_leaf_lo[n] as usize]
+                } else {
+                    [0.0; 3]
+                }
             } else {
                 let mut acc = [0.0; 3];
                 for k in 0..4 {
@@ -161,11 +245,21 @@ impl System {
     pub fn relative_residual(&self, b: &[Rgb]) -> f64 {
         let r = self.norm(&self.residual(b));
         let d = self.norm(b);
-        if d > 0.0 { r / d } else if r > 0.0 { f64::INFINITY } else { 0.0 }
+        if d > 0.0 {
+            r / d
+        } else if r > 0.0 {
+            f64::INFINITY
+        } else {
+            0.0
+        }
     }
 
     /// Total source power (area × sum of channels), the scale for unshot fractions.
     pub fn source_power(&self) -> f64 {
-        self.source.iter().zip(&self.area).map(|(s, a)| a * (s[0].abs() + s[1].abs() + s[2].abs())).sum()
+        self.source
+            .iter()
+            .zip(&self.area)
+            .map(|(s, a)| a * (s[0].abs() + s[1].abs() + s[2].abs()))
+            .sum()
     }
 }

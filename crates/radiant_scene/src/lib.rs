@@ -325,6 +325,9 @@ mod tests {
 
     #[test]
     fn unknown_builtin_is_an_error() {
-        assert!(matches!(builtin("teapot"), Err(SceneError::UnknownBuiltin(_))));
+        assert!(matches!(
+            builtin("teapot"),
+            Err(SceneError::UnknownBuiltin(_))
+        ));
     }
 }

@@ -60,7 +60,11 @@ struct Tri {
 impl Tri {
     fn new(t: &[Vec3; 3]) -> Self {
         let v0 = Vec3A::from(t[0]);
-        Tri { v0, e1: Vec3A::from(t[1]) - v0, e2: Vec3A::from(t[2]) - v0 }
+        Tri {
+            v0,
+            e1: Vec3A::from(t[1]) - v0,
+            e2: Vec3A::from(t[2]) - v0,
+        }
     }
 
     /// Möller–Trumbore, two-sided. Returns (t, u, v, front) for `t` in `[tmin, tmax]`.
@@ -73,13 +77,16 @@ impl Tri {
         }
         let inv = 1.0 / det;
         let s = o - self.v0;
+        // A hair of slack on the barycentric tests makes neighbouring triangles watertight: a
+        // ray through a shared edge must not slip between them by rounding.
+        const SLACK: f32 = 1e-6;
         let u = s.dot(p) * inv;
-        if !(0.0..=1.0).contains(&u) {
+        if !(-SLACK..=1.0 + SLACK).contains(&u) {
             return None;
         }
         let q = s.cross(self.e1);
         let v = d.dot(q) * inv;
-        if v < 0.0 || u + v > 1.0 {
+        if v < -SLACK || u + v > 1.0 + SLACK {
             return None;
         }
         let t = self.e2.dot(q) * inv;
@@ -102,17 +109,19 @@ pub struct BruteForce {
 impl BruteForce {
     /// Takes the triangles' vertices.
     pub fn new(triangles: &[[Vec3; 3]]) -> Self {
-        BruteForce { tris: triangles.iter().map(Tri::new).collect() }
+        BruteForce {
+            tris: triangles.iter().map(Tri::new).collect(),
+        }
     }
 }
 
 impl Visibility for BruteForce {
     fn segment_clear(&self, a: Vec3, b: Vec3) -> bool {
         let (o, d) = (Vec3A::from(a), Vec3A::from(b - a));
-        !self
-            .tris
-            .iter()
-            .any(|t| t.intersect(o, d, SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON).is_some())
+        !self.tris.iter().any(|t| {
+            t.intersect(o, d, SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON)
+                .is_some()
+        })
     }
 
     fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit> {
@@ -122,7 +131,13 @@ impl Visibility for BruteForce {
         for (i, tri) in self.tris.iter().enumerate() {
             let limit = best.map_or(tmax, |b| b.t);
             if let Some((t, u, v, front)) = tri.intersect(o, d, tmin, limit) {
-                best = Some(Hit { triangle: i as u32, t, u, v, front });
+                best = Some(Hit {
+                    triangle: i as u32,
+                    t,
+                    u,
+                    v,
+                    front,
+                });
             }
         }
         best
@@ -142,7 +157,11 @@ impl Bvh {
     /// Builds the BVH. An empty input gives a BVH that never hits.
     pub fn new(triangles: &[[Vec3; 3]]) -> Self {
         if triangles.is_empty() {
-            return Bvh { bvh: Bvh2::default(), tris: Vec::new(), ids: Vec::new() };
+            return Bvh {
+                bvh: Bvh2::default(),
+                tris: Vec::new(),
+                ids: Vec::new(),
+            };
         }
         let obvhs_tris: Vec<obvhs::triangle::Triangle> = triangles
             .iter()
@@ -158,7 +177,10 @@ impl Bvh {
             &mut Duration::default(),
         );
         let ids = bvh.primitive_indices.clone();
-        let tris = ids.iter().map(|&i| Tri::new(&triangles[i as usize])).collect();
+        let tris = ids
+            .iter()
+            .map(|&i| Tri::new(&triangles[i as usize]))
+            .collect();
         Bvh { bvh, tris, ids }
     }
 }
@@ -185,16 +207,24 @@ impl Visibility for Bvh {
         let ray = Ray::new(o, d, ray_tmin(dir), tmax);
         let mut hit = obvhs::ray::RayHit::none();
         let mut best: Option<(f32, f32, f32, bool, usize)> = None;
-        self.bvh.ray_traverse(ray, &mut hit, |r, id| match self.tris[id].intersect(r.origin, r.direction, r.tmin, r.tmax) {
-            Some((t, u, v, front)) => {
-                if best.is_none_or(|b| t < b.0) {
-                    best = Some((t, u, v, front, id));
+        self.bvh.ray_traverse(ray, &mut hit, |r, id| {
+            match self.tris[id].intersect(r.origin, r.direction, r.tmin, r.tmax) {
+                Some((t, u, v, front)) => {
+                    if best.is_none_or(|b| t < b.0) {
+                        best = Some((t, u, v, front, id));
+                    }
+                    t
                 }
-                t
+                None => f32::INFINITY,
             }
-            None => f32::INFINITY,
         });
-        best.map(|(t, u, v, front, id)| Hit { triangle: self.ids[id], t, u, v, front })
+        best.map(|(t, u, v, front, id)| Hit {
+            triangle: self.ids[id],
+            t,
+            u,
+            v,
+            front,
+        })
     }
 }
 
@@ -233,8 +263,15 @@ mod tests {
         let mut hits = 0;
         for _ in 0..5000 {
             let (a, b) = (rng.v() * 1.5, rng.v() * 1.5);
-            assert_eq!(bvh.segment_clear(a, b), brute.segment_clear(a, b), "segment {a} {b}");
-            let (h1, h2) = (bvh.closest_hit(a, b - a, f32::INFINITY), brute.closest_hit(a, b - a, f32::INFINITY));
+            assert_eq!(
+                bvh.segment_clear(a, b),
+                brute.segment_clear(a, b),
+                "segment {a} {b}"
+            );
+            let (h1, h2) = (
+                bvh.closest_hit(a, b - a, f32::INFINITY),
+                brute.closest_hit(a, b - a, f32::INFINITY),
+            );
             match (h1, h2) {
                 (Some(x), Some(y)) => {
                     hits += 1;
@@ -253,7 +290,11 @@ mod tests {
 
     #[test]
     fn both_sides_block_and_ends_do_not() {
-        let tri = [[Vec3::new(-1., 0., -1.), Vec3::new(1., 0., -1.), Vec3::new(0., 0., 1.)]];
+        let tri = [[
+            Vec3::new(-1., 0., -1.),
+            Vec3::new(1., 0., -1.),
+            Vec3::new(0., 0., 1.),
+        ]];
         for vis in [&Bvh::new(&tri) as &dyn Visibility, &BruteForce::new(&tri)] {
             assert!(!vis.segment_clear(Vec3::Y, -Vec3::Y));
             assert!(!vis.segment_clear(-Vec3::Y, Vec3::Y));

@@ -64,7 +64,11 @@ fn contour(n: DVec3, r: &[DVec3]) -> f64 {
         sum += gamma * n.dot(c) / cl;
     }
     let f = -sum / std::f64::consts::TAU;
-    if f.is_finite() { f.clamp(0.0, 1.0) } else { 0.0 }
+    if f.is_finite() {
+        f.clamp(0.0, 1.0)
+    } else {
+        0.0
+    }
 }
 
 #[cfg(test)]
@@ -101,7 +105,12 @@ mod tests {
         let expect = 1.0 / std::f64::consts::TAU
             * (x / (1.0 + x * x).sqrt() * (y / (1.0 + x * x).sqrt()).atan()
                 + y / (1.0 + y * y).sqrt() * (x / (1.0 + y * y).sqrt()).atan());
-        let p = [DVec3::new(0., 0., c), DVec3::new(0., b, c), DVec3::new(a, b, c), DVec3::new(a, 0., c)];
+        let p = [
+            DVec3::new(0., 0., c),
+            DVec3::new(0., b, c),
+            DVec3::new(a, b, c),
+            DVec3::new(a, 0., c),
+        ];
         let f = point_to_triangle(DVec3::ZERO, DVec3::Z, &[p[0], p[1], p[2]], -DVec3::Z)
             + point_to_triangle(DVec3::ZERO, DVec3::Z, &[p[0], p[2], p[3]], -DVec3::Z);
         assert!((f - expect).abs() < 1e-12, "{f} vs {expect}");
@@ -110,7 +119,11 @@ mod tests {
     #[test]
     fn closed_cube_sums_to_one_from_any_interior_point() {
         let cube = crate::testing::unit_cube_inward();
-        for x in [DVec3::new(0.5, 0.5, 1e-9), DVec3::new(0.01, 0.99, 1e-12), DVec3::new(0.3, 0.2, 0.0)] {
+        for x in [
+            DVec3::new(0.5, 0.5, 1e-9),
+            DVec3::new(0.01, 0.99, 1e-12),
+            DVec3::new(0.3, 0.2, 0.0),
+        ] {
             let n = DVec3::Z;
             let s: f64 = cube
                 .iter()
@@ -126,14 +139,25 @@ mod tests {
     #[test]
     fn shared_edge_and_behind_are_finite() {
         // Perpendicular wall sharing the receiver's edge, point on the edge itself.
-        let wall = [DVec3::new(0., 0., 0.), DVec3::new(0., 0., 1.), DVec3::new(0., 1., 1.)];
+        let wall = [
+            DVec3::new(0., 0., 0.),
+            DVec3::new(0., 0., 1.),
+            DVec3::new(0., 1., 1.),
+        ];
         let wn = (wall[1] - wall[0]).cross(wall[2] - wall[0]).normalize();
-        for x in [DVec3::new(0.0, 0.5, 0.0), DVec3::new(1e-300, 0.5, 0.0), DVec3::new(-1.0, 0.5, 0.0)] {
+        for x in [
+            DVec3::new(0.0, 0.5, 0.0),
+            DVec3::new(1e-300, 0.5, 0.0),
+            DVec3::new(-1.0, 0.5, 0.0),
+        ] {
             let f = point_to_triangle(x, DVec3::Z, &wall, wn);
             assert!(f.is_finite() && (0.0..=1.0).contains(&f), "{f}");
         }
         // Seen from behind: zero.
-        assert_eq!(point_to_triangle(DVec3::new(1.0, 0.5, 0.5), -DVec3::X, &wall, wn), 0.0);
+        assert_eq!(
+            point_to_triangle(DVec3::new(1.0, 0.5, 0.5), -DVec3::X, &wall, wn),
+            0.0
+        );
         assert!(point_to_triangle(DVec3::new(-1.0, 0.5, 0.5), DVec3::X, &wall, wn) > 0.0);
     }
 }

@@ -54,7 +54,13 @@ impl FormFactorMethod for HemicubeMethod {
         let (x, n) = (r.centroid, r.normal);
         let (t, b) = basis(n);
         // (forward, right, up, rows): the top face, then the four sides with the normal up.
-        let faces = [(n, t, b, res), (t, b, n, res / 2), (-t, -b, n, res / 2), (b, -t, n, res / 2), (-b, t, n, res / 2)];
+        let faces = [
+            (n, t, b, res),
+            (t, b, n, res / 2),
+            (-t, -b, n, res / 2),
+            (b, -t, n, res / 2),
+            (-b, t, n, res / 2),
+        ];
         let mut acc = vec![0.0f64; row.sources.len()];
         let mut depth = vec![f64::INFINITY; (res * res) as usize];
         let mut owner = vec![u32::MAX; (res * res) as usize];
@@ -94,7 +100,9 @@ impl FormFactorMethod for HemicubeMethod {
                 if dir.dot(tri.normal) >= 0.0 {
                     continue;
                 }
-                let Some((bu, bv)) = barycentric_hit(x, dir, &tri.v) else { continue };
+                let Some((bu, bv)) = barycentric_hit(x, dir, &tri.v) else {
+                    continue;
+                };
                 let leaf = ctx.mesh.locate(o, bu, bv);
                 if let Some(k) = find_source(ctx.mesh, row.sources, leaf) {
                     acc[k] += weights[pix];
@@ -160,7 +168,12 @@ fn raster(tri: &[DVec3; 3], res: u32, rows: u32, y0: f64, mut emit: impl FnMut(u
     // Plane of the triangle in face coordinates: depth along the pixel ray (sx, sy, 1).
     let nrm = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
     let num = nrm.dot(tri[0]);
-    let (mut lo_x, mut hi_x, mut lo_y, mut hi_y) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    let (mut lo_x, mut hi_x, mut lo_y, mut hi_y) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
     for &(sx, sy) in &scr {
         lo_x = lo_x.min(sx);
         hi_x = hi_x.max(sx);
@@ -169,8 +182,14 @@ fn raster(tri: &[DVec3; 3], res: u32, rows: u32, y0: f64, mut emit: impl FnMut(u
     }
     let px = 2.0 / f64::from(res);
     let to_i = |v: f64, lo: f64, n: u32| (((v - lo) / px - 0.5).clamp(-1.0, f64::from(n))) as i64;
-    let (i0, i1) = (to_i(lo_x, -1.0, res).max(0), (to_i(hi_x, -1.0, res) + 1).min(i64::from(res) - 1));
-    let (j0, j1) = (to_i(lo_y, y0, rows).max(0), (to_i(hi_y, y0, rows) + 1).min(i64::from(rows) - 1));
+    let (i0, i1) = (
+        to_i(lo_x, -1.0, res).max(0),
+        (to_i(hi_x, -1.0, res) + 1).min(i64::from(res) - 1),
+    );
+    let (j0, j1) = (
+        to_i(lo_y, y0, rows).max(0),
+        (to_i(hi_y, y0, rows) + 1).min(i64::from(rows) - 1),
+    );
     if i0 > i1 || j0 > j1 {
         return;
     }
@@ -188,9 +207,13 @@ fn raster(tri: &[DVec3; 3], res: u32, rows: u32, y0: f64, mut emit: impl FnMut(u
         let sy = y0 + (j as f64 + 0.5) * px;
         for i in i0..=i1 {
             let sx = -1.0 + (i as f64 + 0.5) * px;
+            // A hair of tolerance makes the raster watertight: a pixel centre on an edge shared
+            // by two triangles must not fall through both by rounding (the depth test then
+            // picks one of the two).
             let inside = (0..m).all(|k| {
                 let (a, b) = (scr[k], scr[(k + 1) % m]);
-                sign * ((b.0 - a.0) * (sy - a.1) - (b.1 - a.1) * (sx - a.0)) >= 0.0
+                let e = (b.0 - a.0) * (sy - a.1) - (b.1 - a.1) * (sx - a.0);
+                sign * e >= -1e-9 * ((b.0 - a.0).abs() + (b.1 - a.1).abs())
             });
             if inside {
                 let den = nrm.dot(DVec3::new(sx, sy, 1.0));

@@ -37,8 +37,12 @@ pub enum FormFactorKind {
 
 impl FormFactorKind {
     /// All methods, in the order reports list them.
-    pub const ALL: [FormFactorKind; 4] =
-        [Self::Analytic, Self::Hemicube, Self::RayCast, Self::MonteCarlo];
+    pub const ALL: [FormFactorKind; 4] = [
+        Self::Analytic,
+        Self::Hemicube,
+        Self::RayCast,
+        Self::MonteCarlo,
+    ];
 
     /// The CLI name.
     pub fn name(self) -> &'static str {
@@ -52,7 +56,11 @@ impl FormFactorKind {
 
     /// Parses a CLI name.
     pub fn parse(s: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|k| k.name() == s || (s == "ray-cast" && *k == Self::RayCast) || (s == "monte-carlo" && *k == Self::MonteCarlo))
+        Self::ALL.into_iter().find(|k| {
+            k.name() == s
+                || (s == "ray-cast" && *k == Self::RayCast)
+                || (s == "monte-carlo" && *k == Self::MonteCarlo)
+        })
     }
 }
 
@@ -63,7 +71,8 @@ pub struct FormFactorParams {
     pub hemicube_resolution: u32,
     /// Monte Carlo: rays per receiver (default: 256).
     pub monte_carlo_rays: u32,
-    /// Ray-cast: minimum sample points per source node (default: 4).
+    /// Ray-cast: minimum sample points per source node; nodes that subtend more get up to 256
+    /// (default: 4).
     pub ray_cast_samples: u32,
     /// Seed for every random choice; results depend on nothing else (default: 1).
     pub seed: u64,
@@ -71,7 +80,12 @@ pub struct FormFactorParams {
 
 impl Default for FormFactorParams {
     fn default() -> Self {
-        FormFactorParams { hemicube_resolution: 128, monte_carlo_rays: 256, ray_cast_samples: 4, seed: 1 }
+        FormFactorParams {
+            hemicube_resolution: 128,
+            monte_carlo_rays: 256,
+            ray_cast_samples: 4,
+            seed: 1,
+        }
     }
 }
 
@@ -118,7 +132,11 @@ pub fn method(kind: FormFactorKind) -> &'static dyn FormFactorMethod {
 /// A uniformly distributed point on a triangle.
 #[inline]
 pub(crate) fn sample_triangle(v: &[DVec3; 3], r1: f64, r2: f64) -> DVec3 {
-    let (a, b) = if r1 + r2 > 1.0 { (1.0 - r1, 1.0 - r2) } else { (r1, r2) };
+    let (a, b) = if r1 + r2 > 1.0 {
+        (1.0 - r1, 1.0 - r2)
+    } else {
+        (r1, r2)
+    };
     v[0] + (v[1] - v[0]) * a + (v[2] - v[0]) * b
 }
 
@@ -127,7 +145,10 @@ pub(crate) fn sample_triangle(v: &[DVec3; 3], r1: f64, r2: f64) -> DVec3 {
 fn stratified(k: u32, n: u32, rng: &mut Rng) -> (f64, f64) {
     let m = (n as f64).sqrt().ceil() as u32;
     let (i, j) = (k % m, k / m);
-    ((i as f64 + rng.f64()) / m as f64, ((j % m) as f64 + rng.f64()) / m as f64)
+    (
+        (i as f64 + rng.f64()) / m as f64,
+        ((j % m) as f64 + rng.f64()) / m as f64,
+    )
 }
 
 /// Fraction of `n` segments from `x` to stratified points on `node`'s triangle that are clear.
@@ -147,7 +168,11 @@ fn visible_fraction(ctx: &FfContext, x: DVec3, nx: DVec3, node: u32, n: u32, rng
             clear += 1;
         }
     }
-    if valid == 0 { 1.0 } else { f64::from(clear) / f64::from(valid) }
+    if valid == 0 {
+        1.0
+    } else {
+        f64::from(clear) / f64::from(valid)
+    }
 }
 
 /// Lambert's contour integral times a visibility fraction.
@@ -161,7 +186,14 @@ impl FormFactorMethod for AnalyticMethod {
         let r = ctx.mesh.leaf_node(row.leaf);
         for (k, &s) in row.sources.iter().enumerate() {
             let mut rng = Rng::new(hash(ctx.params.seed, u64::from(row.leaf), u64::from(s)));
-            let v = visible_fraction(ctx, r.centroid, r.normal, s, u32::from(row.samples[k]), &mut rng);
+            let v = visible_fraction(
+                ctx,
+                r.centroid,
+                r.normal,
+                s,
+                u32::from(row.samples[k]),
+                &mut rng,
+            );
             out[k] = (row.unoccluded[k] * v) as f32;
         }
     }
@@ -180,9 +212,20 @@ impl FormFactorMethod for RayCastMethod {
         let x = r.centroid;
         for (k, &s) in row.sources.iter().enumerate() {
             let node = &ctx.mesh.nodes[s as usize];
-            let n = u32::from(row.samples[k]).max(ctx.params.ray_cast_samples).max(1);
+            // More samples where the source subtends more (Wallace et al. subdivide the source
+            // until each disc is small against its distance): the disc approximation
+            // underestimates near sources.
+            let by_size = (row.unoccluded[k] * 256.0).ceil().min(256.0) as u32;
+            let n = u32::from(row.samples[k])
+                .max(ctx.params.ray_cast_samples)
+                .max(by_size)
+                .max(1);
             let da = node.area / f64::from(n);
-            let mut rng = Rng::new(hash(ctx.params.seed ^ 0x5A5A, u64::from(row.leaf), u64::from(s)));
+            let mut rng = Rng::new(hash(
+                ctx.params.seed ^ 0x5A5A,
+                u64::from(row.leaf),
+                u64::from(s),
+            ));
             let mut f = 0.0;
             for i in 0..n {
                 let (r1, r2) = stratified(i, n, &mut rng);
@@ -225,13 +268,18 @@ impl FormFactorMethod for MonteCarloMethod {
             let (rad, phi) = (u1.sqrt(), std::f64::consts::TAU * u2);
             let z = (1.0 - u1).max(0.0).sqrt();
             let dir = t * (rad * phi.cos()) + b * (rad * phi.sin()) + r.normal * z;
-            let Some(hit) = ctx.vis.closest_hit(r.centroid.as_vec3(), dir.as_vec3(), f32::INFINITY) else {
+            let Some(hit) = ctx
+                .vis
+                .closest_hit(r.centroid.as_vec3(), dir.as_vec3(), f32::INFINITY)
+            else {
                 continue;
             };
             if !hit.front {
                 continue;
             }
-            let leaf = ctx.mesh.locate(hit.triangle, f64::from(hit.u), f64::from(hit.v));
+            let leaf = ctx
+                .mesh
+                .locate(hit.triangle, f64::from(hit.u), f64::from(hit.v));
             if let Some(k) = find_source(ctx.mesh, row.sources, leaf) {
                 counts[k] += 1;
             }

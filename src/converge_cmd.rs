@@ -1,0 +1,182 @@
+//! `radiant converge`: error against run time for each method × form-factor combination.
+
+use std::fmt::Write as _;
+use std::time::{Duration, Instant};
+
+use radiant::radiosity::metrics::{self, ErrorStats};
+use radiant::radiosity::solvers::{Direct, Solver};
+use radiant::radiosity::{Bake, BakeError, Rgb};
+
+use crate::bake_cmd::{progress_bar, reference_for};
+use crate::output::{ensure_dir, write_atomic};
+use crate::plot::{Curve, plot_convergence};
+use crate::{ConvergeArgs, load_scene, parse_ff, parse_solver};
+
+/// One row of `convergence.csv`.
+struct Row {
+    t_s: f64,
+    iterations: u64,
+    error: ErrorStats,
+    residual: f64,
+}
+
+pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
+    args.solve.init_threads()?;
+    let (scene, source) = load_scene(&args.scene)?;
+    let solvers = args
+        .methods
+        .iter()
+        .map(|m| parse_solver(m))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let ffs = args
+        .form_factors
+        .iter()
+        .map(|f| parse_ff(f))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    anyhow::ensure!(
+        args.sample_every > 0.0 && args.sample_every.is_finite(),
+        "--sample-every must be positive"
+    );
+    let use_direct = args.reference.as_deref() == Some("direct");
+    let file_ref = match args.reference.as_deref() {
+        Some("direct") => None,
+        other => reference_for(&args.scene, other.map(std::path::Path::new))?,
+    };
+    let reference_name = file_ref.as_ref().map_or(
+        "direct solve on the same mesh (solver error)".to_string(),
+        |(n, _)| n.clone(),
+    );
+    let time_limit = args.solve.time_limit.unwrap_or(10.0);
+    ensure_dir(&args.out)?;
+
+    let mut csv = String::from(
+        "method,form_factors,t_s,iterations,rel_rms_error,max_rel_error,mean_rel_error,residual\n",
+    );
+    let mut curves = Vec::new();
+    let mut summary = Vec::new();
+    for &ff in &ffs {
+        for &solver in &solvers {
+            let label = format!("{} / {}", solver.name(), ff.name());
+            let mut params = args.solve.params(solver, ff)?;
+            params.time_limit = Some(Duration::from_secs_f64(time_limit));
+            let pb = progress_bar(1, &label);
+            let mut bake = match Bake::with_progress(&scene, &params, &|d, n| {
+                pb.set_length(n as u64);
+                pb.set_position(d as u64);
+            }) {
+                Ok(b) => b,
+                Err(e) => {
+                    pb.finish_and_clear();
+                    println!("{label}: skipped: {e}");
+                    continue;
+                }
+            };
+            // Time spent measuring the error is not the method's: subtract it.
+            let mut overhead = Duration::ZERO;
+            let direct_ref: Option<Vec<Rgb>> = if use_direct {
+                let t = Instant::now();
+                let mut d = Direct::new(params.solver_params);
+                match d.step(&bake.system, Duration::ZERO) {
+                    Ok(_) => {}
+                    Err(e @ BakeError::TooLargeForDirect { .. }) => {
+                        pb.finish_and_clear();
+                        println!("{label}: skipped: the direct reference needs it: {e}");
+                        continue;
+                    }
+                    Err(e) => return Err(e.into()),
+                }
+                overhead += t.elapsed();
+                Some(d.radiosity(&bake.system))
+            } else {
+                None
+            };
+            let mut rows = Vec::new();
+            let mut last = None;
+            loop {
+                let p = match bake.step(Duration::from_secs_f64(args.sample_every)) {
+                    Ok(p) => p,
+                    Err(e) => {
+                        println!("{label}: stopped: {e}");
+                        break;
+                    }
+                };
+                let t = Instant::now();
+                let b = bake.radiosity();
+                let error = match (&direct_ref, &file_ref) {
+                    (Some(r), _) => metrics::compare_elements(&bake.system.area, &b, r),
+                    (None, Some((_, rows))) => metrics::compare_surfaces(
+                        &metrics::surface_means(&bake.surfaces, &bake.mesh, &b),
+                        rows,
+                    )?,
+                    (None, None) => unreachable_reference()?,
+                };
+                overhead += t.elapsed();
+                let t_s = bake.elapsed() - overhead.as_secs_f64();
+                rows.push(Row {
+                    t_s,
+                    iterations: p.iterations,
+                    error,
+                    residual: p.residual,
+                });
+                pb.set_message(format!("{label}: {:.2} %", error.mean_rel * 100.0));
+                last = Some((p, error, t_s));
+                if p.converged || t_s >= time_limit || !p.residual.is_finite() {
+                    break;
+                }
+            }
+            pb.finish_and_clear();
+            for r in &rows {
+                let _ = writeln!(
+                    csv,
+                    "{},{},{:.6},{},{:.6e},{:.6e},{:.6e},{:.6e}",
+                    solver.name(),
+                    ff.name(),
+                    r.t_s,
+                    r.iterations,
+                    r.error.rel_rms,
+                    r.error.max_rel,
+                    r.error.mean_rel,
+                    r.residual
+                );
+            }
+            // Time to 1 % mean error, if reached.
+            let to_1pct = rows
+                .iter()
+                .find(|r| r.error.mean_rel <= 0.01)
+                .map(|r| r.t_s);
+            if let Some((p, e, t)) = last {
+                let line = format!(
+                    "{label:28} {:>8.3} s  mean {:6.3} %  max {:6.3} %  rms {:6.3} %  residual {:.1e}  1 % at {}",
+                    t,
+                    e.mean_rel * 100.0,
+                    e.max_rel * 100.0,
+                    e.rel_rms * 100.0,
+                    p.residual,
+                    to_1pct.map_or("never".to_string(), |t| format!("{t:.3} s"))
+                );
+                println!("{line}");
+                summary.push(line);
+            }
+            curves.push(Curve {
+                label,
+                points: rows.iter().map(|r| (r.t_s, r.error.mean_rel)).collect(),
+            });
+        }
+    }
+    write_atomic(&args.out.join("convergence.csv"), csv.as_bytes())?;
+    let png = plot_convergence(
+        &curves,
+        &format!("{source}: mean relative error vs time (reference: {reference_name})"),
+    )?;
+    write_atomic(&args.out.join("convergence.png"), &png)?;
+    println!("reference: {reference_name}");
+    println!(
+        "wrote {}/convergence.csv and convergence.png",
+        args.out.display()
+    );
+    Ok(())
+}
+
+fn unreachable_reference() -> anyhow::Result<ErrorStats> {
+    anyhow::bail!("no reference: give --reference direct or a per-surface CSV")
+}

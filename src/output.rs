@@ -1,0 +1,190 @@
+//! Writing bake outputs. Every file is written to a temporary name in the same directory and
+//! renamed into place, so a crash never leaves a half-written output.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::Context;
+use radiant::radiosity::lightmap::LightMap;
+use radiant::radiosity::metrics::{ErrorStats, SurfaceMean};
+use radiant::radiosity::{BakeReport, BakeResult};
+use radiant::scene::Scene;
+use serde_json::{Value, json};
+
+/// Writes `bytes` to `path` atomically (temporary file, then rename).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .context("output path has no file name")?
+        .to_string_lossy();
+    let tmp = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    std::fs::write(&tmp, bytes).with_context(|| format!("cannot write {}", tmp.display()))?;
+    std::fs::rename(&tmp, path)
+        .with_context(|| format!("cannot rename {} to {}", tmp.display(), path.display()))?;
+    Ok(())
+}
+
+/// Creates the output directory.
+pub fn ensure_dir(dir: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("cannot create output directory {}", dir.display()))
+}
+
+/// `surfaces.csv`: `surface,area,b_r,b_g,b_b`.
+pub fn surfaces_csv(surfaces: &[SurfaceMean]) -> String {
+    let mut s = String::from("surface,area,b_r,b_g,b_b\n");
+    for m in surfaces {
+        let _ = writeln!(
+            s,
+            "{},{:.9e},{:.9e},{:.9e},{:.9e}",
+            csv_name(&m.name),
+            m.area,
+            m.mean[0],
+            m.mean[1],
+            m.mean[2]
+        );
+    }
+    s
+}
+
+fn csv_name(name: &str) -> String {
+    if name.contains([',', '"', '\n']) {
+        format!("\"{}\"", name.replace('"', "\"\""))
+    } else {
+        name.to_string()
+    }
+}
+
+/// `patches.csv`: one row per element, world units.
+pub fn patches_csv(scene: &Scene, result: &BakeResult) -> String {
+    let mesh = &result.mesh;
+    let sys = &result.system;
+    let mut s = String::with_capacity(mesh.element_count() * 200);
+    s.push_str("id,surface,cx,cy,cz,nx,ny,nz,area,rho_r,rho_g,rho_b,e_r,e_g,e_b,b_r,b_g,b_b\n");
+    let s2 = mesh.frame.scale * mesh.frame.scale;
+    for (i, &id) in mesh.leaves.iter().enumerate() {
+        let n = &mesh.nodes[id as usize];
+        let surface = &scene.surfaces[mesh.root_surface[n.root as usize] as usize];
+        let c = mesh.frame.to_world(n.centroid);
+        let (r, e, b) = (sys.rho[i], surface.emission, result.radiosity[i]);
+        let _ = writeln!(
+            s,
+            "{i},{},{:.7},{:.7},{:.7},{:.6},{:.6},{:.6},{:.6e},{},{},{},{},{},{},{:.6e},{:.6e},{:.6e}",
+            csv_name(&surface.name),
+            c.x,
+            c.y,
+            c.z,
+            n.normal.x,
+            n.normal.y,
+            n.normal.z,
+            n.area * s2,
+            r[0],
+            r[1],
+            r[2],
+            e[0],
+            e[1],
+            e[2],
+            b[0],
+            b[1],
+            b[2]
+        );
+    }
+    s
+}
+
+/// Error statistics as JSON.
+pub fn error_json(e: &ErrorStats) -> Value {
+    json!({ "rel_rms_error": e.rel_rms, "mean_rel_error": e.mean_rel, "max_rel_error": e.max_rel })
+}
+
+/// `report.json`.
+pub fn report_json(
+    source: &str,
+    r: &BakeReport,
+    import_s: f64,
+    total_s: f64,
+    reference: Option<(&str, &ErrorStats)>,
+    extra: Value,
+) -> Value {
+    let timeline: Vec<Value> = r
+        .timeline
+        .iter()
+        .map(|p| json!({ "t_s": p.t_s, "iterations": p.iterations, "residual": finite(p.residual), "unshot_fraction": finite(p.unshot_fraction) }))
+        .collect();
+    let mut v = json!({
+        "scene": source,
+        "patches": r.patches,
+        "elements": r.elements,
+        "links": r.links,
+        "link_bytes": r.link_bytes,
+        "method": r.solver.name(),
+        "form_factors": r.form_factors.name(),
+        "seconds": {
+            "import": import_s,
+            "meshing": r.times.meshing,
+            "visibility": r.times.visibility,
+            "direct_light": r.times.direct_light,
+            "form_factors": r.times.form_factors,
+            "solve": r.times.solve,
+            "total": total_s,
+        },
+        "iterations": r.iterations,
+        "converged": r.converged,
+        "residual": finite(r.residual),
+        "unshot_fraction": finite(r.unshot_fraction),
+        "has_emitters": r.has_emitters,
+        "timeline": timeline,
+        "warnings": r.warnings,
+        "parameters": extra,
+    });
+    if let Some((name, e)) = reference {
+        v["reference"] = json!({ "source": name, "error": error_json(e) });
+    }
+    v
+}
+
+/// JSON has no NaN or infinity: such values become null.
+fn finite(x: f64) -> Value {
+    if x.is_finite() { json!(x) } else { Value::Null }
+}
+
+/// Writes the light map as Radiance HDR (linear) and a tone-mapped sRGB PNG preview.
+pub fn write_lightmaps(dir: &Path, map: &LightMap) -> anyhow::Result<()> {
+    let (w, h) = (map.width as usize, map.height as usize);
+    let mut hdr = Vec::new();
+    let pixels: Vec<image::Rgb<f32>> = map
+        .texels
+        .iter()
+        .map(|t| image::Rgb(t.map(|v| if v.is_finite() { v.max(0.0) } else { 0.0 })))
+        .collect();
+    image::codecs::hdr::HdrEncoder::new(&mut hdr)
+        .encode(&pixels, w, h)
+        .context("encoding the HDR light map")?;
+    write_atomic(&dir.join("lightmap.hdr"), &hdr)?;
+    // Exposure: the mean of the lit texels maps to mid grey, then ACES.
+    let lit: Vec<f64> = map
+        .texels
+        .iter()
+        .map(|t| radiant::color::luminance(t.map(f64::from)))
+        .filter(|&l| l > 0.0)
+        .collect();
+    let mean = if lit.is_empty() {
+        1.0
+    } else {
+        lit.iter().sum::<f64>() / lit.len() as f64
+    };
+    let exposure = if mean > 0.0 { 0.18 / mean } else { 1.0 };
+    let mut png = image::RgbImage::new(map.width, map.height);
+    for (p, t) in png.pixels_mut().zip(&map.texels) {
+        let c = radiant::color::Tonemap::AcesFitted.apply(t.map(|v| f64::from(v) * exposure));
+        *p = image::Rgb(c.map(radiant::color::linear_to_srgb8));
+    }
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    png.write_to(&mut bytes, image::ImageFormat::Png)
+        .context("encoding the PNG light map")?;
+    write_atomic(&dir.join("lightmap.png"), bytes.get_ref())
+}

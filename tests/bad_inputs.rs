@@ -1,0 +1,170 @@
+//! Bad glTF inputs (tests/bad_inputs/, written by tools/make_bad_inputs.py): each gives its typed
+//! [`SceneError`], with a one-line message, and none panics.
+
+use std::panic;
+use std::path::{Path, PathBuf};
+
+use radiant_scene::{SceneError, load_gltf, load_gltf_slice};
+
+fn dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/bad_inputs")
+}
+
+/// Each bad file and the error it must give.
+const CASES: &[(&str, fn(&SceneError) -> bool)] = &[
+    ("empty.gltf", |e| matches!(e, SceneError::Empty)),
+    ("whitespace.gltf", |e| matches!(e, SceneError::Empty)),
+    ("not_gltf.gltf", |e| matches!(e, SceneError::NotGltf(_))),
+    ("truncated_json.gltf", |e| {
+        matches!(e, SceneError::NotGltf(_))
+    }),
+    ("truncated.glb", |e| matches!(e, SceneError::Glb(_))),
+    // Without the "glTF" magic the bytes are read as JSON, which they are not.
+    ("bad_magic.glb", |e| matches!(e, SceneError::NotGltf(_))),
+    ("glb_length_below_header.glb", |e| {
+        matches!(e, SceneError::Glb(_))
+    }),
+    ("missing_buffer.gltf", |e| {
+        matches!(e, SceneError::Buffer(_))
+    }),
+    ("short_buffer.gltf", |e| matches!(e, SceneError::Buffer(_))),
+    ("bad_percent_uri.gltf", |e| {
+        matches!(e, SceneError::Buffer(_))
+    }),
+    ("dangling_accessor.gltf", |e| {
+        matches!(e, SceneError::Invalid(_))
+    }),
+    ("dangling_buffer_view.gltf", |e| {
+        matches!(e, SceneError::Invalid(_))
+    }),
+    ("accessor_out_of_bounds.gltf", |e| {
+        matches!(e, SceneError::AccessorOutOfBounds { accessor: 0 })
+    }),
+    ("zero_count_accessor.gltf", |e| {
+        matches!(e, SceneError::Invalid(_))
+    }),
+    ("stride_too_small.gltf", |e| {
+        matches!(e, SceneError::Invalid(_))
+    }),
+    ("position_not_vec3_float.gltf", |e| {
+        matches!(e, SceneError::Invalid(_))
+    }),
+    ("float_indices.gltf", |e| {
+        matches!(e, SceneError::Invalid(_))
+    }),
+    ("sparse_accessor.gltf", |e| {
+        matches!(e, SceneError::Unsupported(_))
+    }),
+    ("image_view_out_of_bounds.gltf", |e| {
+        matches!(e, SceneError::Invalid(_))
+    }),
+    ("index_out_of_range.gltf", |e| {
+        matches!(
+            e,
+            SceneError::IndexOutOfRange {
+                index: 7,
+                count: 4,
+                ..
+            }
+        )
+    }),
+    ("nan_position.gltf", |e| {
+        matches!(e, SceneError::NonFinitePosition { vertex: 1, .. })
+    }),
+    ("inf_position.gltf", |e| {
+        matches!(e, SceneError::NonFinitePosition { vertex: 2, .. })
+    }),
+    ("cyclic_nodes.gltf", |e| matches!(e, SceneError::Invalid(_))),
+    (
+        "reflectance_above_one.gltf",
+        |e| matches!(e, SceneError::ReflectanceOutOfRange { value, .. } if *value == 1.5),
+    ),
+    (
+        "reflectance_negative.gltf",
+        |e| matches!(e, SceneError::ReflectanceOutOfRange { value, .. } if *value == -0.25),
+    ),
+    (
+        "negative_emission.gltf",
+        |e| matches!(e, SceneError::InvalidEmission { value, .. } if *value == -1.0),
+    ),
+    (
+        "negative_emissive_strength.gltf",
+        |e| matches!(e, SceneError::InvalidEmission { value, .. } if *value == -2.0),
+    ),
+    ("light_negative_intensity.gltf", |e| {
+        matches!(e, SceneError::InvalidLight { .. })
+    }),
+];
+
+/// Files that must load.
+const VALID: &[&str] = &["ok_no_emitters.gltf", "ok_quad.glb", "degenerate_only.gltf"];
+
+#[test]
+fn each_bad_input_gives_its_typed_error() {
+    let mut failures = Vec::new();
+    for (name, expected) in CASES {
+        match load_gltf(&dir().join(name)) {
+            Ok(scene) => failures.push(format!(
+                "{name}: loaded ({} triangles)",
+                scene.triangles.len()
+            )),
+            Err(e) if !expected(&e) => failures.push(format!("{name}: unexpected {e:?}")),
+            Err(e) => {
+                let msg = e.to_string();
+                if msg.is_empty() || msg.contains('\n') {
+                    failures.push(format!("{name}: message not one line: {msg:?}"));
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+#[test]
+fn no_input_panics() {
+    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir())
+        .expect("tests/bad_inputs exists")
+        .map(|entry| entry.expect("directory entry").path())
+        .collect();
+    entries.sort();
+    assert!(entries.len() >= CASES.len() + VALID.len());
+    let panicked: Vec<String> = entries
+        .iter()
+        .filter(|path| {
+            let bytes = std::fs::read(path).expect("readable");
+            panic::catch_unwind(|| load_gltf(path)).is_err()
+                || panic::catch_unwind(|| load_gltf_slice(&bytes)).is_err()
+        })
+        .map(|path| path.display().to_string())
+        .collect();
+    assert!(panicked.is_empty(), "panicked: {panicked:?}");
+}
+
+#[test]
+fn every_case_file_exists() {
+    for name in CASES.iter().map(|c| c.0).chain(VALID.iter().copied()) {
+        assert!(dir().join(name).is_file(), "{name} is missing");
+    }
+}
+
+#[test]
+fn valid_inputs_load() {
+    for name in ["ok_no_emitters.gltf", "ok_quad.glb"] {
+        let scene = load_gltf(&dir().join(name)).expect(name);
+        assert_eq!(scene.triangles.len(), 2, "{name}");
+        assert_eq!(scene.surfaces.len(), 1, "{name}");
+        assert_eq!(scene.surfaces[0].name, "quad");
+        assert_eq!(scene.surfaces[0].reflectance, [0.5; 3]);
+        assert!(!scene.has_emitters(), "{name}");
+        assert_eq!(scene.stats.degenerate_triangles, 0, "{name}");
+    }
+}
+
+#[test]
+fn degenerate_triangles_are_skipped_and_counted() {
+    let scene = load_gltf(&dir().join("degenerate_only.gltf")).expect("loads");
+    assert_eq!(scene.stats.degenerate_triangles, 2);
+    assert!(scene.triangles.is_empty());
+    assert!(!scene.has_emitters());
+    assert_eq!(scene.warnings().len(), 1);
+}

@@ -1,0 +1,242 @@
+//! The `radiant` command line, run as a user would: outputs, reports, and bad input giving one
+//! clear line and a non-zero exit code.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn radiant() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_radiant"))
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("radiant-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+#[test]
+fn bake_writes_every_output() {
+    let out = tmp("bake");
+    let st = radiant()
+        .args([
+            "bake",
+            "--builtin",
+            "cornell-box",
+            "--patch-size",
+            "0.3",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(
+        st.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&st.stdout);
+    assert!(stdout.contains("error against"), "{stdout}");
+    for f in [
+        "surfaces.csv",
+        "patches.csv",
+        "report.json",
+        "lightmap.hdr",
+        "lightmap.png",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let surfaces = std::fs::read_to_string(out.join("surfaces.csv")).expect("surfaces.csv");
+    let mut lines = surfaces.lines();
+    assert_eq!(lines.next(), Some("surface,area,b_r,b_g,b_b"));
+    assert_eq!(lines.count(), 19);
+    let patches = std::fs::read_to_string(out.join("patches.csv")).expect("patches.csv");
+    assert!(patches.starts_with(
+        "id,surface,cx,cy,cz,nx,ny,nz,area,rho_r,rho_g,rho_b,e_r,e_g,e_b,b_r,b_g,b_b\n"
+    ));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report"))
+            .expect("json");
+    for key in [
+        "patches",
+        "elements",
+        "method",
+        "form_factors",
+        "seconds",
+        "iterations",
+        "converged",
+        "residual",
+        "unshot_fraction",
+        "timeline",
+        "warnings",
+    ] {
+        assert!(report.get(key).is_some(), "report.json lacks {key}");
+    }
+    for phase in [
+        "import",
+        "meshing",
+        "visibility",
+        "form_factors",
+        "solve",
+        "total",
+    ] {
+        assert!(report["seconds"][phase].is_number(), "no time for {phase}");
+    }
+    assert_eq!(report["converged"], true);
+    assert!(
+        report["reference"]["error"]["mean_rel_error"]
+            .as_f64()
+            .expect("error")
+            < 0.05
+    );
+    // No temporary files are left behind.
+    let leftovers: Vec<_> = std::fs::read_dir(&out)
+        .expect("dir")
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty());
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn converge_writes_curves_for_each_combination() {
+    let out = tmp("converge");
+    let st = radiant()
+        .args([
+            "converge",
+            "--builtin",
+            "cornell-box",
+            "--patch-size",
+            "0.3",
+            "--element-levels",
+            "1",
+            "--methods",
+            "jacobi,southwell,direct",
+            "--form-factors",
+            "analytic,montecarlo",
+            "--reference",
+            "direct",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(
+        st.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let csv = std::fs::read_to_string(out.join("convergence.csv")).expect("csv");
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next(),
+        Some(
+            "method,form_factors,t_s,iterations,rel_rms_error,max_rel_error,mean_rel_error,residual"
+        )
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    for m in ["jacobi", "southwell", "direct"] {
+        for f in ["analytic", "montecarlo"] {
+            let curve: Vec<&Vec<&str>> = rows.iter().filter(|r| r[0] == m && r[1] == f).collect();
+            assert!(!curve.is_empty(), "no rows for {m}/{f}");
+            // Against the direct solve on the same mesh, every method converges to it.
+            let last: f64 = curve.last().expect("row")[4].parse().expect("number");
+            assert!(last < 1e-3, "{m}/{f} ends at relative RMS {last}");
+        }
+    }
+    let png = std::fs::read(out.join("convergence.png")).expect("png");
+    assert!(png.starts_with(b"\x89PNG"));
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn bad_input_gives_one_line_and_nonzero_exit() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/bad_inputs");
+    let cases: Vec<Vec<String>> = vec![
+        vec![
+            "bake".into(),
+            dir.join("truncated_json.gltf").display().to_string(),
+        ],
+        vec![
+            "bake".into(),
+            dir.join("nan_position.gltf").display().to_string(),
+        ],
+        vec!["bake".into(), dir.join("empty.gltf").display().to_string()],
+        vec!["bake".into(), "/does/not/exist.gltf".into()],
+        vec!["bake".into(), "--builtin".into(), "teapot".into()],
+        vec![
+            "bake".into(),
+            "--builtin".into(),
+            "cornell-box".into(),
+            "--patch-size".into(),
+            "-1".into(),
+        ],
+        vec![
+            "bake".into(),
+            "--builtin".into(),
+            "cornell-box".into(),
+            "--method".into(),
+            "magic".into(),
+        ],
+        vec![
+            "bake".into(),
+            "--builtin".into(),
+            "cornell-box".into(),
+            "--tolerance".into(),
+            "nan".into(),
+        ],
+        vec![
+            "bake".into(),
+            "--builtin".into(),
+            "cornell-box".into(),
+            "--reference".into(),
+            "/does/not/exist.csv".into(),
+        ],
+    ];
+    for args in cases {
+        let out = tmp("bad");
+        let st = radiant()
+            .args(&args)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .expect("runs");
+        let stderr = String::from_utf8_lossy(&st.stderr);
+        assert!(!st.status.success(), "{args:?} succeeded");
+        assert_eq!(st.status.code(), Some(1), "{args:?}: {stderr}");
+        let lines: Vec<&str> = stderr.lines().filter(|l| !l.trim().is_empty()).collect();
+        assert_eq!(lines.len(), 1, "{args:?}: not one line: {stderr}");
+        assert!(lines[0].starts_with("error: "), "{args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+        let _ = std::fs::remove_dir_all(&out);
+    }
+}
+
+#[test]
+fn scene_without_emitters_says_so() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/bad_inputs");
+    let out = tmp("dark");
+    let st = radiant()
+        .arg("bake")
+        .arg(dir.join("ok_no_emitters.gltf"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    assert!(String::from_utf8_lossy(&st.stdout).contains("no emitters"));
+    let surfaces = std::fs::read_to_string(out.join("surfaces.csv")).expect("surfaces");
+    for line in surfaces.lines().skip(1) {
+        let f: Vec<f64> = line
+            .split(',')
+            .skip(2)
+            .map(|v| v.parse().expect("number"))
+            .collect();
+        assert_eq!(f, vec![0.0, 0.0, 0.0]);
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}
