@@ -12,11 +12,14 @@ use serde_json::json;
 use crate::output::{self, ensure_dir, write_atomic};
 use crate::{BakeArgs, SceneArgs, load_scene, parse_ff, parse_solver};
 
+/// A per-surface reference and where it came from.
+pub type NamedReference = (String, Vec<(String, [f64; 3])>);
+
 /// The reference for a bake: a given CSV, or the shipped one for the builtin Cornell box.
 pub fn reference_for(
     scene: &SceneArgs,
     given: Option<&Path>,
-) -> anyhow::Result<Option<(String, Vec<(String, [f64; 3])>)>> {
+) -> anyhow::Result<Option<NamedReference>> {
     if let Some(path) = given {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("cannot read reference {}", path.display()))?;

@@ -11,7 +11,10 @@ fn dir() -> PathBuf {
 }
 
 /// Each bad file and the error it must give.
-const CASES: &[(&str, fn(&SceneError) -> bool)] = &[
+/// A check on the error a file must give.
+type Expect = fn(&SceneError) -> bool;
+
+const CASES: &[(&str, Expect)] = &[
     ("empty.gltf", |e| matches!(e, SceneError::Empty)),
     ("whitespace.gltf", |e| matches!(e, SceneError::Empty)),
     ("not_gltf.gltf", |e| matches!(e, SceneError::NotGltf(_))),

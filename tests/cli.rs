@@ -168,8 +168,7 @@ fn bad_input_gives_one_line_and_nonzero_exit() {
             "bake".into(),
             "--builtin".into(),
             "cornell-box".into(),
-            "--patch-size".into(),
-            "-1".into(),
+            "--patch-size=-1".into(),
         ],
         vec![
             "bake".into(),

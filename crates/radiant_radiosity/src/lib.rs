@@ -15,6 +15,11 @@
 //! assert!(floor.mean[0] > 0.05 && floor.mean[0] < 0.3);
 //! ```
 
+#![expect(
+    clippy::needless_range_loop,
+    reason = "RGB channel loops index several arrays at once; iterators would hide that"
+)]
+
 pub mod bake;
 pub mod form_factors;
 pub mod lightmap;

@@ -269,7 +269,7 @@ impl Solver for GaussSeidel {
                 break;
             }
             // Check convergence every few sweeps within a long budget.
-            if self.iterations % 4 == 0 {
+            if self.iterations.is_multiple_of(4) {
                 let r = sys.residual(&self.b);
                 let p = progress_from_residual(
                     sys,
@@ -519,10 +519,18 @@ impl Solver for Southwell {
         }
         // Overshooting can make the unshot sum negative; the display never subtracts.
         let amb = self.ambient(sys).map(|a| a.max(0.0));
+        // Elements inside closed geometry see nothing, ambient included.
         self.b
             .iter()
             .zip(&sys.rho)
-            .map(|(b, r)| std::array::from_fn(|c| b[c] + r[c] * amb[c]))
+            .zip(&sys.weight)
+            .map(|((b, r), &w)| {
+                if w > 0.0 {
+                    std::array::from_fn(|c| b[c] + r[c] * amb[c])
+                } else {
+                    *b
+                }
+            })
             .collect()
     }
 }
@@ -602,7 +610,7 @@ impl Direct {
             return Err(BakeError::Singular);
         }
         let residual = sys.relative_residual(&out);
-        if !(residual <= 1e-6) {
+        if residual.is_nan() || residual > 1e-6 {
             return Err(BakeError::Singular);
         }
         Ok(out)

@@ -84,4 +84,8 @@ fn cornell_box_light_leaks_nowhere() {
         under > 10,
         "the test must see elements under the block ({under})"
     );
+    assert!(
+        exact * 10 >= under * 9,
+        "only {exact} of {under} elements under the block are exactly 0"
+    );
 }

@@ -5,7 +5,7 @@ mod common;
 
 use glam::DVec3;
 use radiant_radiosity::scenes::{add_surface, box_triangles, quad};
-use radiant_radiosity::{Bake, BakeError, BakeParams, FormFactorKind, SolverKind};
+use radiant_radiosity::{Bake, BakeError, BakeParams, FormFactorKind, SolverKind, SolverParams};
 use radiant_scene::Scene;
 
 fn all_finite(r: &radiant_radiosity::BakeResult) {
@@ -119,9 +119,14 @@ fn areas_spanning_ten_to_the_twelve() {
         SolverKind::GaussSeidel,
         SolverKind::Southwell,
     ] {
-        let mut p = BakeParams::default();
-        p.solver = solver;
-        p.solver_params.tolerance = 1e-8;
+        let p = BakeParams {
+            solver,
+            solver_params: SolverParams {
+                tolerance: 1e-8,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
         let r = common::bake(&s, &p);
         all_finite(&r);
         let speck = common::surface(&r, "speck").mean[0];

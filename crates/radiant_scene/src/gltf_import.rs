@@ -119,19 +119,19 @@ fn load(bytes: &[u8], base: Option<&Path>) -> Result<Scene, SceneError> {
         if let Some(light) = node.light() {
             importer.light(&name, &light, world)?;
         }
-        if let (Some(cam), None) = (node.camera(), importer.scene.camera) {
-            if let gltf::camera::Projection::Perspective(p) = cam.projection() {
-                let forward = world.transform_vector3(DVec3::NEG_Z).normalize_or_zero();
-                let up = world.transform_vector3(DVec3::Y).normalize_or_zero();
-                let yfov = f64::from(p.yfov());
-                if forward != DVec3::ZERO && up != DVec3::ZERO && yfov.is_finite() && yfov > 0.0 {
-                    importer.scene.camera = Some(Camera {
-                        position: world.transform_point3(DVec3::ZERO),
-                        forward,
-                        up,
-                        yfov,
-                    });
-                }
+        if let (Some(cam), None) = (node.camera(), importer.scene.camera)
+            && let gltf::camera::Projection::Perspective(p) = cam.projection()
+        {
+            let forward = world.transform_vector3(DVec3::NEG_Z).normalize_or_zero();
+            let up = world.transform_vector3(DVec3::Y).normalize_or_zero();
+            let yfov = f64::from(p.yfov());
+            if forward != DVec3::ZERO && up != DVec3::ZERO && yfov.is_finite() && yfov > 0.0 {
+                importer.scene.camera = Some(Camera {
+                    position: world.transform_point3(DVec3::ZERO),
+                    forward,
+                    up,
+                    yfov,
+                });
             }
         }
         for child in node.children() {
@@ -268,18 +268,21 @@ fn check_accessors(doc: &gltf::Document, buffers: &[gltf::buffer::Data]) -> Resu
     Ok(())
 }
 
+/// Reflectance, emission and name of a material.
+type MaterialValues = ([f64; 3], [f64; 3], String);
+
 struct Importer<'a> {
     buffers: &'a [gltf::buffer::Data],
     images: &'a [gltf::image::Data],
     scene: Scene,
-    /// Cache of material index → (reflectance, emission, name).
-    material_surfaces: Vec<(Option<usize>, [f64; 3], [f64; 3], String)>,
+    /// Materials already read, by glTF material index.
+    material_surfaces: Vec<(Option<usize>, MaterialValues)>,
 }
 
 impl Importer<'_> {
-    fn material(&mut self, m: &gltf::Material) -> Result<([f64; 3], [f64; 3], String), SceneError> {
+    fn material(&mut self, m: &gltf::Material) -> Result<MaterialValues, SceneError> {
         if let Some(hit) = self.material_surfaces.iter().find(|c| c.0 == m.index()) {
-            return Ok((hit.1, hit.2, hit.3.clone()));
+            return Ok(hit.1.clone());
         }
         let name = m
             .name()
@@ -319,7 +322,7 @@ impl Importer<'_> {
             }
         }
         self.material_surfaces
-            .push((m.index(), rho, emission, name.clone()));
+            .push((m.index(), (rho, emission, name.clone())));
         Ok((rho, emission, name))
     }
 
@@ -523,7 +526,7 @@ fn is_degenerate(t: &Triangle) -> bool {
         .max((c - b).length_squared())
         .max((a - c).length_squared());
     let cross = t.cross().length();
-    !(cross > 1e-12 * longest) || !cross.is_finite()
+    cross.partial_cmp(&(1e-12 * longest)) != Some(std::cmp::Ordering::Greater) || !cross.is_finite()
 }
 
 /// Mean linear colour of an 8-bit sRGB texture; `None` for formats it does not read.

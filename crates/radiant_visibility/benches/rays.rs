@@ -72,5 +72,13 @@ fn bench(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, bench);
+#[allow(
+    missing_docs,
+    reason = "criterion_group! generates an undocumented function"
+)]
+mod group {
+    use super::*;
+    criterion_group!(benches, bench);
+}
+use group::benches;
 criterion_main!(benches);

@@ -55,7 +55,7 @@ fn contour(n: DVec3, r: &[DVec3]) -> f64 {
         let c = a.cross(b);
         let cl = c.length();
         let scale = a.length() * b.length();
-        if !(cl > 1e-14 * scale) {
+        if cl.is_nan() || cl <= 1e-14 * scale {
             // Parallel: zero angle (outside the edge) or the point on the edge. Either way the
             // term is bounded; drop it.
             continue;
