@@ -90,6 +90,8 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
             } else {
                 None
             };
+            // The time limit is the solver's: form factors always finish first.
+            let prepared = bake.elapsed() - overhead.as_secs_f64();
             let mut rows = Vec::new();
             let mut last = None;
             loop {
@@ -120,7 +122,7 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
                 });
                 pb.set_message(format!("{label}: {:.2} %", error.mean_rel * 100.0));
                 last = Some((p, error, t_s));
-                if p.converged || t_s >= time_limit || !p.residual.is_finite() {
+                if p.converged || t_s - prepared >= time_limit || !p.residual.is_finite() {
                     break;
                 }
             }
@@ -156,6 +158,9 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
                 );
                 println!("{line}");
                 summary.push(line);
+            }
+            if rows.is_empty() {
+                continue;
             }
             curves.push(Curve {
                 label,

@@ -60,7 +60,10 @@ pub fn plot_convergence(curves: &[Curve], title: &str) -> anyhow::Result<Vec<u8>
             .x_desc("wall time (s), form factors included")
             .y_desc("mean relative error")
             .y_label_formatter(&|v| format!("{:.2} %", v * 100.0))
-            .x_label_formatter(&|v| format!("{v:.3}"))
+            .x_label_formatter(&|v| {
+                let s = format!("{v:.3}");
+                s.trim_end_matches('0').trim_end_matches('.').to_string()
+            })
             .draw()
             .context("plot mesh")?;
         // The 1 % line.

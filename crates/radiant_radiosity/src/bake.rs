@@ -29,7 +29,7 @@ pub struct BakeParams {
     pub solver: SolverKind,
     /// Solver parameters (tolerance etc.).
     pub solver_params: SolverParams,
-    /// Stop solving after this long, converged or not (default: none).
+    /// Stop solving after this long (solve phase only), converged or not (default: none).
     pub time_limit: Option<Duration>,
     /// Length of one solver step between progress reports (default: 25 ms).
     pub step_budget: Duration,
@@ -354,10 +354,7 @@ impl Bake {
         loop {
             let p = self.step(self.params.step_budget)?;
             on_event(BakeEvent::Solve(&p, self.elapsed()));
-            let out_of_time = self
-                .params
-                .time_limit
-                .is_some_and(|l| self.started.elapsed() >= l);
+            let out_of_time = self.params.time_limit.is_some_and(|l| self.solving >= l);
             if p.residual < 0.99 * best {
                 (best, since_best) = (p.residual, 0);
             } else {

@@ -60,6 +60,19 @@ fn load(bytes: &[u8], base: Option<&Path>) -> Result<Scene, SceneError> {
         gltf::Error::ExternalReferenceInSliceImport => {
             SceneError::Buffer("external buffer reference, but no directory to resolve it".into())
         }
+        gltf::Error::Io(io) => {
+            // Name the file: the gltf crate's I/O error does not.
+            let uris: Vec<String> = document
+                .buffers()
+                .filter_map(|b| match b.source() {
+                    gltf::buffer::Source::Uri(u) if !u.starts_with("data:") => {
+                        Some(format!("'{u}'"))
+                    }
+                    _ => None,
+                })
+                .collect();
+            SceneError::Buffer(format!("cannot read {}: {io}", uris.join(", ")))
+        }
         other => SceneError::Buffer(other.to_string()),
     })?;
     check_accessors(&document, &buffers)?;
@@ -68,7 +81,26 @@ fn load(bytes: &[u8], base: Option<&Path>) -> Result<Scene, SceneError> {
         .materials()
         .any(|m| m.pbr_metallic_roughness().base_color_texture().is_some());
     let images = if needs_images {
-        gltf::import_images(&document, base, &buffers)
+        // gltf 1.4.1 decodes an image's data URI only when given a base directory; without one
+        // (slice import) it refuses every URI image as an external reference. So, without a
+        // directory, refuse the truly external ones here and give it an empty base, which only
+        // data URIs then reach (no file is read).
+        let base = match base {
+            Some(dir) => dir,
+            None => {
+                if let Some(image) = document.images().find(|i| {
+                    matches!(i.source(), gltf::image::Source::Uri { uri, .. }
+                        if !uri.starts_with("data:"))
+                }) {
+                    return Err(SceneError::Invalid(format!(
+                        "image {}: external reference, but no directory to resolve it",
+                        image.index()
+                    )));
+                }
+                Path::new("")
+            }
+        };
+        gltf::import_images(&document, Some(base), &buffers)
             .map_err(|e| SceneError::Invalid(format!("image: {e}")))?
     } else {
         Vec::new()

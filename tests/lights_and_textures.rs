@@ -1,0 +1,566 @@
+//! Punctual lights (point, spot, directional with a shadow) and base-colour textures, through the
+//! whole pipeline: glTF JSON with embedded data-URI buffers → import → bake → per-element
+//! radiosity against closed forms.
+//!
+//! Every scene is a floor, which cannot see itself, plus at most a black occluder, so there is no
+//! indirect light: each element's radiosity is exactly the direct term `ρ E / π` at its centroid.
+
+use std::f64::consts::PI;
+use std::io::Cursor;
+
+use radiant::color::srgb_to_linear;
+use radiant::radiosity::{Bake, BakeParams, BakeResult};
+use radiant::scene::{Scene, SceneError, load_gltf_slice};
+
+// ---------------------------------------------------------------------------------------------
+// A tiny glTF writer.
+
+/// Standard base64 with padding (RFC 4648).
+fn base64(bytes: &[u8]) -> String {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
+    for chunk in bytes.chunks(3) {
+        let b = [
+            chunk[0],
+            chunk.get(1).copied().unwrap_or(0),
+            chunk.get(2).copied().unwrap_or(0),
+        ];
+        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for k in 0..4 {
+            if k <= chunk.len() {
+                out.push(char::from(ALPHABET[(n >> (18 - 6 * k)) as usize & 63]));
+            } else {
+                out.push('=');
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn base64_matches_rfc4648_vectors() {
+    for (input, want) in [
+        ("", ""),
+        ("f", "Zg=="),
+        ("fo", "Zm8="),
+        ("foo", "Zm9v"),
+        ("foob", "Zm9vYg=="),
+        ("fooba", "Zm9vYmE="),
+        ("foobar", "Zm9vYmFy"),
+    ] {
+        assert_eq!(base64(input.as_bytes()), want, "{input:?}");
+    }
+    assert_eq!(base64(&[0xfb, 0xff, 0xbf]), "+/+/");
+}
+
+/// A glTF document under construction: one binary buffer, one node per mesh or light.
+#[derive(Default)]
+struct Doc {
+    bin: Vec<u8>,
+    views: Vec<String>,
+    accessors: Vec<String>,
+    meshes: Vec<String>,
+    nodes: Vec<String>,
+    materials: Vec<String>,
+    lights: Vec<String>,
+    /// Further top-level members, as `"key": value`.
+    extra: Vec<String>,
+}
+
+impl Doc {
+    /// Appends bytes as a buffer view (4-byte aligned); returns the view index.
+    fn view(&mut self, bytes: &[u8]) -> usize {
+        while !self.bin.len().is_multiple_of(4) {
+            self.bin.push(0);
+        }
+        self.views.push(format!(
+            r#"{{"buffer":0,"byteOffset":{},"byteLength":{}}}"#,
+            self.bin.len(),
+            bytes.len()
+        ));
+        self.bin.extend_from_slice(bytes);
+        self.views.len() - 1
+    }
+
+    /// Adds a material given as a JSON object; returns its index.
+    fn material(&mut self, json: String) -> usize {
+        self.materials.push(json);
+        self.materials.len() - 1
+    }
+
+    /// Adds a node with a one-primitive triangle mesh.
+    fn mesh(&mut self, name: &str, positions: &[[f32; 3]], indices: &[u16], material: usize) {
+        let pos_bytes: Vec<u8> = positions
+            .iter()
+            .flatten()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let idx_bytes: Vec<u8> = indices.iter().flat_map(|i| i.to_le_bytes()).collect();
+        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        for p in positions {
+            for c in 0..3 {
+                lo[c] = lo[c].min(p[c]);
+                hi[c] = hi[c].max(p[c]);
+            }
+        }
+        let pv = self.view(&pos_bytes);
+        let iv = self.view(&idx_bytes);
+        self.accessors.push(format!(
+            r#"{{"bufferView":{pv},"componentType":5126,"count":{},"type":"VEC3","min":[{},{},{}],"max":[{},{},{}]}}"#,
+            positions.len(),
+            lo[0],
+            lo[1],
+            lo[2],
+            hi[0],
+            hi[1],
+            hi[2]
+        ));
+        self.accessors.push(format!(
+            r#"{{"bufferView":{iv},"componentType":5123,"count":{},"type":"SCALAR"}}"#,
+            indices.len()
+        ));
+        let (pa, ia) = (self.accessors.len() - 2, self.accessors.len() - 1);
+        self.meshes.push(format!(
+            r#"{{"name":"{name}","primitives":[{{"attributes":{{"POSITION":{pa}}},"indices":{ia},"material":{material}}}]}}"#
+        ));
+        self.nodes.push(format!(
+            r#"{{"name":"{name}","mesh":{}}}"#,
+            self.meshes.len() - 1
+        ));
+    }
+
+    /// Adds a KHR_lights_punctual light (JSON object) on a node with the given extra members
+    /// (`"translation": [...]`, `"rotation": [...]`, or empty).
+    fn light(&mut self, light: String, node_members: &str) {
+        self.lights.push(light);
+        let sep = if node_members.is_empty() { "" } else { "," };
+        self.nodes.push(format!(
+            r#"{{"name":"light node {}"{sep}{node_members},"extensions":{{"KHR_lights_punctual":{{"light":{}}}}}}}"#,
+            self.lights.len() - 1,
+            self.lights.len() - 1
+        ));
+    }
+
+    /// The document as glTF JSON.
+    fn json(&self) -> String {
+        let list = |v: &[String]| format!("[{}]", v.join(","));
+        let mut members = vec![
+            r#""asset":{"version":"2.0"}"#.to_string(),
+            r#""scene":0"#.to_string(),
+            format!(
+                r#""scenes":[{{"nodes":[{}]}}]"#,
+                (0..self.nodes.len())
+                    .map(|i| i.to_string())
+                    .collect::<Vec<_>>()
+                    .join(",")
+            ),
+            format!(r#""nodes":{}"#, list(&self.nodes)),
+        ];
+        if !self.meshes.is_empty() {
+            members.push(format!(r#""meshes":{}"#, list(&self.meshes)));
+            members.push(format!(r#""accessors":{}"#, list(&self.accessors)));
+            members.push(format!(r#""bufferViews":{}"#, list(&self.views)));
+            members.push(format!(
+                r#""buffers":[{{"byteLength":{},"uri":"data:application/octet-stream;base64,{}"}}]"#,
+                self.bin.len(),
+                base64(&self.bin)
+            ));
+        }
+        if !self.materials.is_empty() {
+            members.push(format!(r#""materials":{}"#, list(&self.materials)));
+        }
+        if !self.lights.is_empty() {
+            members.push(r#""extensionsUsed":["KHR_lights_punctual"]"#.to_string());
+            members.push(format!(
+                r#""extensions":{{"KHR_lights_punctual":{{"lights":{}}}}}"#,
+                list(&self.lights)
+            ));
+        }
+        members.extend(self.extra.iter().cloned());
+        format!("{{{}}}", members.join(","))
+    }
+
+    /// Imports the document.
+    fn load(&self) -> Result<Scene, SceneError> {
+        load_gltf_slice(self.json().as_bytes())
+    }
+}
+
+/// A diffuse material with linear base colour `rho`.
+fn diffuse(name: &str, rho: [f64; 3], double_sided: bool) -> String {
+    format!(
+        r#"{{"name":"{name}","doubleSided":{double_sided},"pbrMetallicRoughness":{{"baseColorFactor":[{},{},{},1],"metallicFactor":0}}}}"#,
+        rho[0], rho[1], rho[2]
+    )
+}
+
+/// A rectangle `[x0, x1] × [z0, z1]` in the plane `y`, facing `+y`.
+fn rect_up(x0: f32, x1: f32, z0: f32, z1: f32, y: f32) -> ([[f32; 3]; 4], [u16; 6]) {
+    (
+        [[x0, y, z1], [x1, y, z1], [x1, y, z0], [x0, y, z0]],
+        [0, 1, 2, 0, 2, 3],
+    )
+}
+
+/// Rotation by -90° about x as a glTF quaternion (x, y, z, w): the node's -z axis points to -y.
+const POINT_DOWN: &str = r#""rotation":[-0.7071068,0,0,0.7071068]"#;
+
+/// Floor reflectance, different per channel so the channels are checked separately. glTF
+/// stores it as `f32` (0.4 becomes 0.400000006), so the expected values use the `f32` value.
+const RHO: [f32; 3] = [0.5, 0.4, 0.25];
+
+/// The floor's reflectance in channel `c`, as imported.
+fn rho(c: usize) -> f64 {
+    f64::from(RHO[c])
+}
+/// Half the floor's side (m): the floor is 10 m × 10 m, centred on the origin at y = 0.
+const HALF: f32 = 5.0;
+
+/// A document with the floor.
+fn floor_doc() -> Doc {
+    let mut doc = Doc::default();
+    let m = doc.material(diffuse("floor", RHO.map(f64::from), false));
+    let (p, i) = rect_up(-HALF, HALF, -HALF, HALF, 0.0);
+    doc.mesh("floor", &p, &i, m);
+    doc
+}
+
+fn params() -> BakeParams {
+    let mut p = BakeParams::default();
+    p.mesh.patch_size = 1.0;
+    p.mesh.element_levels = 2;
+    p
+}
+
+fn bake(scene: &Scene) -> BakeResult {
+    Bake::new(scene, &params())
+        .expect("bake prepares")
+        .run_to_end(&mut |_| {})
+        .expect("bake runs")
+}
+
+/// One element: its world centroid, unit normal, surface index and radiosity.
+struct Element {
+    centroid: [f64; 3],
+    normal: [f64; 3],
+    surface: u32,
+    b: [f64; 3],
+}
+
+fn elements(r: &BakeResult) -> Vec<Element> {
+    (0..r.mesh.element_count())
+        .map(|i| {
+            let node = r.mesh.leaf_node(i as u32);
+            let c = r.mesh.frame.to_world(node.centroid);
+            Element {
+                centroid: [c.x, c.y, c.z],
+                normal: [node.normal.x, node.normal.y, node.normal.z],
+                surface: r.mesh.root_surface[node.root as usize],
+                b: r.radiosity[i],
+            }
+        })
+        .collect()
+}
+
+fn surface_index(scene: &Scene, name: &str) -> u32 {
+    scene
+        .surfaces
+        .iter()
+        .position(|s| s.name == name)
+        .unwrap_or_else(|| panic!("surface {name}")) as u32
+}
+
+/// Radiosity `ρ I cos θ / (π d²)` at `x` (normal `n`) from `I` candela at `light`.
+fn point_radiosity(rho: f64, intensity: f64, light: [f64; 3], x: [f64; 3], n: [f64; 3]) -> f64 {
+    let d = [light[0] - x[0], light[1] - x[1], light[2] - x[2]];
+    let d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    let cos = (d[0] * n[0] + d[1] * n[1] + d[2] * n[2]) / d2.sqrt();
+    rho * intensity * cos.max(0.0) / d2 / PI
+}
+
+/// Horizontal distance from `x` to the vertical axis through the origin.
+fn radial(x: [f64; 3]) -> f64 {
+    x[0].hypot(x[2])
+}
+
+fn rel(got: f64, want: f64) -> f64 {
+    (got - want).abs() / want.abs()
+}
+
+// ---------------------------------------------------------------------------------------------
+// The tests.
+
+#[test]
+fn point_light_irradiance_matches_inverse_square() {
+    let (intensity, h) = (100.0, 2.0);
+    let mut doc = floor_doc();
+    doc.light(
+        format!(r#"{{"name":"bulb","type":"point","color":[1,1,1],"intensity":{intensity}}}"#),
+        &format!(r#""translation":[0,{h},0]"#),
+    );
+    let scene = doc.load().expect("scene loads");
+    assert_eq!(scene.lights.len(), 1);
+    let floor = surface_index(&scene, "floor");
+    let r = bake(&scene);
+    let light = [0.0, h, 0.0];
+    let (mut checked, mut worst) = (0, 0.0f64);
+    for e in elements(&r).iter().filter(|e| e.surface == floor) {
+        assert!(e.normal[1] > 0.999_999, "floor faces up");
+        if radial(e.centroid) > 1.5 {
+            continue;
+        }
+        for c in 0..3 {
+            let want = point_radiosity(rho(c), intensity, light, e.centroid, e.normal);
+            let dev = rel(e.b[c], want);
+            assert!(
+                dev < 1e-9,
+                "element at {:?}, channel {c}: B = {} vs {want}",
+                e.centroid,
+                e.b[c]
+            );
+            worst = worst.max(dev);
+        }
+        checked += 1;
+    }
+    assert!(checked > 100, "only {checked} elements near the light");
+    println!("point light: {checked} elements, worst relative deviation {worst:.3e}");
+}
+
+#[test]
+fn spot_light_cone() {
+    let (intensity, h, inner, outer) = (100.0, 2.0, 0.4, 0.6);
+    let mut doc = floor_doc();
+    doc.light(
+        format!(
+            r#"{{"name":"spot","type":"spot","intensity":{intensity},"spot":{{"innerConeAngle":{inner},"outerConeAngle":{outer}}}}}"#
+        ),
+        &format!(r#""translation":[0,{h},0],{POINT_DOWN}"#),
+    );
+    let scene = doc.load().expect("scene loads");
+    let l = &scene.lights[0];
+    assert!(
+        (l.direction.y + 1.0).abs() < 1e-6,
+        "spot points down: {}",
+        l.direction
+    );
+    let floor = surface_index(&scene, "floor");
+    let r = bake(&scene);
+    let light = [0.0, h, 0.0];
+    let (mut inside, mut outside, mut between, mut worst) = (0, 0, 0, 0.0f64);
+    for e in elements(&r).iter().filter(|e| e.surface == floor) {
+        // Angle from the spot's axis (straight down).
+        let angle = radial(e.centroid).atan2(h - e.centroid[1]);
+        for c in 0..3 {
+            let point = point_radiosity(rho(c), intensity, light, e.centroid, e.normal);
+            if angle < inner - 0.02 {
+                let dev = rel(e.b[c], point);
+                assert!(
+                    dev < 1e-9,
+                    "inside the inner cone at {:?}: B = {} vs {point}",
+                    e.centroid,
+                    e.b[c]
+                );
+                worst = worst.max(dev);
+            } else if angle > outer + 0.02 {
+                assert_eq!(e.b[c], 0.0, "outside the outer cone at {:?}", e.centroid);
+            } else if angle > inner + 0.02 && angle < outer - 0.02 {
+                // The falloff: some light, less than the full point-light value.
+                assert!(
+                    e.b[c] > 0.0 && e.b[c] < point,
+                    "in the falloff at {:?}: B = {} vs {point}",
+                    e.centroid,
+                    e.b[c]
+                );
+            }
+        }
+        if angle < inner - 0.02 {
+            inside += 1;
+        } else if angle > outer + 0.02 {
+            outside += 1;
+        } else {
+            between += 1;
+        }
+    }
+    assert!(
+        inside > 50 && outside > 1000 && between > 20,
+        "{inside} / {between} / {outside}"
+    );
+    println!(
+        "spot light: {inside} elements inside (worst relative deviation {worst:.3e}), \
+         {between} in the falloff, {outside} outside (all exactly 0)"
+    );
+}
+
+#[test]
+fn directional_light_and_shadow() {
+    let illuminance = 3.0;
+    // The occluder's footprint, off the element grid's centroids.
+    let (x0, x1, z0, z1, y) = (-1.05f32, 0.95f32, -0.95f32, 1.55f32, 1.0f32);
+    let mut doc = floor_doc();
+    let black = doc.material(diffuse("black", [0.0; 3], true));
+    let (p, i) = rect_up(x0, x1, z0, z1, y);
+    doc.mesh("occluder", &p, &i, black);
+    doc.light(
+        format!(r#"{{"name":"sun","type":"directional","intensity":{illuminance}}}"#),
+        POINT_DOWN,
+    );
+    let scene = doc.load().expect("scene loads");
+    let floor = surface_index(&scene, "floor");
+    let occluder = surface_index(&scene, "occluder");
+    // Double-sided: each of the two triangles is also imported facing down.
+    assert_eq!(
+        scene
+            .triangles
+            .iter()
+            .filter(|t| t.surface == occluder)
+            .count(),
+        4
+    );
+    let r = bake(&scene);
+    let under = |x: [f64; 3]| {
+        (f64::from(x0)..=f64::from(x1)).contains(&x[0])
+            && (f64::from(z0)..=f64::from(z1)).contains(&x[2])
+    };
+    let (mut lit, mut shadowed, mut worst) = (0, 0, 0.0f64);
+    for e in elements(&r) {
+        if e.surface == occluder {
+            assert_eq!(e.b, [0.0; 3], "the occluder is black");
+            continue;
+        }
+        assert_eq!(e.surface, floor);
+        if under(e.centroid) {
+            assert_eq!(e.b, [0.0; 3], "shadowed element at {:?}", e.centroid);
+            shadowed += 1;
+        } else {
+            for c in 0..3 {
+                let want = rho(c) * illuminance / PI;
+                let dev = rel(e.b[c], want);
+                assert!(
+                    dev < 1e-6,
+                    "lit element at {:?}: B = {} vs {want}",
+                    e.centroid,
+                    e.b[c]
+                );
+                worst = worst.max(dev);
+            }
+            lit += 1;
+        }
+    }
+    // The footprint is 2 m × 2.5 m of the 100 m² floor.
+    let expected_shadowed = (lit + shadowed) as f64 * 5.0 / 100.0;
+    assert!(
+        (shadowed as f64 - expected_shadowed).abs() < 0.1 * expected_shadowed,
+        "{shadowed} shadowed elements, about {expected_shadowed} expected"
+    );
+    println!(
+        "directional light: {lit} lit elements (worst relative deviation {worst:.3e}), \
+         {shadowed} shadowed (all exactly 0)"
+    );
+}
+
+#[test]
+fn base_color_texture_mean_scales_reflectance() {
+    let texels: [[u8; 3]; 4] = [[255, 0, 128], [64, 200, 32], [10, 20, 30], [128, 128, 128]];
+    let img = image::RgbImage::from_raw(2, 2, texels.concat()).expect("2 × 2 RGB");
+    let mut png = Cursor::new(Vec::new());
+    img.write_to(&mut png, image::ImageFormat::Png)
+        .expect("PNG encodes");
+    // Exact in `f32`, so the expected product needs no rounding.
+    let factor = [1.0, 0.5, 0.75];
+
+    let mut doc = Doc::default();
+    let m = doc.material(format!(
+        r#"{{"name":"textured","pbrMetallicRoughness":{{"baseColorFactor":[{},{},{},1],"baseColorTexture":{{"index":0}}}}}}"#,
+        factor[0], factor[1], factor[2]
+    ));
+    let (p, i) = rect_up(0.0, 1.0, 0.0, 1.0, 0.0);
+    doc.mesh("tile", &p, &i, m);
+    doc.extra
+        .push(r#""samplers":[{"magFilter":9729,"minFilter":9729}]"#.into());
+    doc.extra
+        .push(r#""textures":[{"sampler":0,"source":0}]"#.into());
+    doc.extra.push(format!(
+        r#""images":[{{"uri":"data:image/png;base64,{}"}}]"#,
+        base64(png.get_ref())
+    ));
+    let scene = doc.load().expect("scene with a data-URI texture loads");
+    let s = &scene.surfaces[surface_index(&scene, "tile") as usize];
+    // The mean of the decoded (linear) texels, per channel.
+    let mean: [f64; 3] = std::array::from_fn(|c| {
+        texels
+            .iter()
+            .map(|t| srgb_to_linear(f64::from(t[c]) / 255.0))
+            .sum::<f64>()
+            / 4.0
+    });
+    for c in 0..3 {
+        let want = factor[c] * mean[c];
+        let dev = (s.reflectance[c] - want).abs();
+        assert!(
+            dev < 1e-12,
+            "channel {c}: reflectance {} vs {want}",
+            s.reflectance[c]
+        );
+        println!(
+            "texture: channel {c} reflectance {} (want {want}, deviation {dev:.1e})",
+            s.reflectance[c]
+        );
+    }
+}
+
+#[test]
+fn lights_with_bad_parameters_are_typed_errors() {
+    let cases = [
+        (
+            "equal cones",
+            r#"{"name":"bad","type":"spot","intensity":1,"spot":{"innerConeAngle":0.5,"outerConeAngle":0.5}}"#,
+        ),
+        (
+            "inner above outer",
+            r#"{"name":"bad","type":"spot","intensity":1,"spot":{"innerConeAngle":0.6,"outerConeAngle":0.4}}"#,
+        ),
+        (
+            "range 0",
+            r#"{"name":"bad","type":"point","intensity":1,"range":0}"#,
+        ),
+    ];
+    for (what, light) in cases {
+        // With and without geometry: the light is checked either way.
+        for with_floor in [false, true] {
+            let mut doc = if with_floor {
+                floor_doc()
+            } else {
+                Doc::default()
+            };
+            doc.light(light.to_string(), r#""translation":[0,2,0]"#);
+            match doc.load() {
+                Err(SceneError::InvalidLight {
+                    light: name,
+                    what: msg,
+                }) => {
+                    assert_eq!(name, "bad", "{what}: {msg}");
+                }
+                other => panic!("{what}: expected InvalidLight, got {other:?}"),
+            }
+        }
+    }
+}
+
+/// Slice import has no directory: an image that is neither a data URI nor a buffer view is a
+/// typed error, and nothing is read from the working directory.
+#[test]
+fn external_image_in_slice_import_is_a_typed_error() {
+    let mut doc = Doc::default();
+    let m = doc.material(
+        r#"{"name":"textured","pbrMetallicRoughness":{"baseColorTexture":{"index":0}}}"#.into(),
+    );
+    let (p, i) = rect_up(0.0, 1.0, 0.0, 1.0, 0.0);
+    doc.mesh("tile", &p, &i, m);
+    doc.extra.push(r#""textures":[{"source":0}]"#.into());
+    doc.extra
+        .push(r#""images":[{"uri":"Cargo.toml","mimeType":"image/png"}]"#.into());
+    match doc.load() {
+        Err(SceneError::Invalid(msg)) => assert!(msg.contains("external"), "{msg}"),
+        other => panic!("expected Invalid, got {other:?}"),
+    }
+}
