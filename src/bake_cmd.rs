@@ -62,6 +62,14 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     let reference = reference_for(&args.scene, args.reference.as_deref())?;
     let (scene, source) = load_scene(&args.scene)?;
     let import_s = start.elapsed().as_secs_f64();
+    if let Some((name, rows)) = &reference {
+        // Check before baking, not after: a reference for another scene is a mistake.
+        let known = scene
+            .surfaces
+            .iter()
+            .any(|s| !s.is_emitter() && rows.iter().any(|(n, _)| *n == s.name));
+        anyhow::ensure!(known, "reference {name} names none of the scene's surfaces");
+    }
     ensure_dir(&args.out)?;
 
     let pb = progress_bar(1, "form factors");

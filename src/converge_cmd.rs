@@ -37,11 +37,13 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
         args.sample_every > 0.0 && args.sample_every.is_finite(),
         "--sample-every must be positive"
     );
-    let use_direct = args.reference.as_deref() == Some("direct");
     let file_ref = match args.reference.as_deref() {
         Some("direct") => None,
         other => reference_for(&args.scene, other.map(std::path::Path::new))?,
     };
+    // With no reference file (a scene of the user's without --reference), the direct solve on
+    // the same mesh is the reference.
+    let use_direct = file_ref.is_none();
     let reference_name = file_ref.as_ref().map_or(
         "direct solve on the same mesh (solver error)".to_string(),
         |(n, _)| n.clone(),
@@ -58,7 +60,7 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
         for &solver in &solvers {
             let label = format!("{} / {}", solver.name(), ff.name());
             let mut params = args.solve.params(solver, ff)?;
-            params.time_limit = Some(Duration::from_secs_f64(time_limit));
+            params.time_limit = Some(crate::seconds(time_limit)?);
             let pb = progress_bar(1, &label);
             let mut bake = match Bake::with_progress(&scene, &params, &|d, n| {
                 pb.set_length(n as u64);
@@ -95,7 +97,7 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
             let mut rows = Vec::new();
             let mut last = None;
             loop {
-                let p = match bake.step(Duration::from_secs_f64(args.sample_every)) {
+                let p = match bake.step(crate::seconds(args.sample_every)?) {
                     Ok(p) => p,
                     Err(e) => {
                         println!("{label}: stopped: {e}");
@@ -183,5 +185,5 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
 }
 
 fn unreachable_reference() -> anyhow::Result<ErrorStats> {
-    anyhow::bail!("no reference: give --reference direct or a per-surface CSV")
+    anyhow::bail!("internal: no reference chosen")
 }

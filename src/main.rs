@@ -54,7 +54,8 @@ pub(crate) struct SolveArgs {
     /// this times the refinement threshold.
     #[arg(long, default_value_t = 0.05)]
     pub(crate) far_field: f64,
-    /// Relative residual at which the solver stops.
+    /// Estimated relative error at which the solver stops: the relative residual divided by
+    /// 1 − ρ̂ (ρ̂: largest reflectance × row sum), so stiff scenes do not stop early.
     #[arg(long, default_value_t = 1e-4)]
     pub(crate) tolerance: f64,
     /// Stop solving after this many seconds, converged or not.
@@ -95,8 +96,8 @@ pub(crate) struct BakeArgs {
     /// box: the shipped Mitsuba 3 reference).
     #[arg(long)]
     pub(crate) reference: Option<PathBuf>,
-    /// Width of the light-map atlas in texels.
-    #[arg(long, default_value_t = 1024)]
+    /// Width of the light-map atlas in texels (16 to 16384).
+    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(16..=16384))]
     pub(crate) lightmap_width: u32,
     #[command(flatten)]
     pub(crate) solve: SolveArgs,
@@ -150,6 +151,11 @@ impl SolveArgs {
         };
         p.mesh.element_levels = self.element_levels;
         p.links.refinement = self.refinement;
+        anyhow::ensure!(
+            self.far_field.is_finite() && self.far_field >= 0.0,
+            "--far-field {} must be a number >= 0",
+            self.far_field
+        );
         p.links.far_field = self.far_field;
         p.form_factors = ff;
         p.ff.seed = self.seed;
@@ -163,7 +169,7 @@ impl SolveArgs {
                 t > 0.0 && t.is_finite(),
                 "--time-limit {t} must be a positive number of seconds"
             );
-            p.time_limit = Some(std::time::Duration::from_secs_f64(t));
+            p.time_limit = Some(seconds(t)?);
         }
         Ok(p)
     }
@@ -178,6 +184,12 @@ impl SolveArgs {
         }
         Ok(())
     }
+}
+
+/// Seconds as a `Duration`, with a clear error instead of a panic for absurd values.
+pub(crate) fn seconds(t: f64) -> anyhow::Result<std::time::Duration> {
+    std::time::Duration::try_from_secs_f64(t)
+        .map_err(|_| anyhow::anyhow!("{t} seconds is out of range"))
 }
 
 /// Parses a solver name.

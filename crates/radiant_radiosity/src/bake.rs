@@ -210,6 +210,11 @@ impl Bake {
                 p.tolerance
             )));
         }
+        if !(params.links.far_field.is_finite() && params.links.far_field >= 0.0) {
+            return Err(BakeError::InvalidParameter(
+                "far field must be a number >= 0".into(),
+            ));
+        }
         if !(params.links.refinement.is_finite() && params.links.refinement > 0.0) {
             return Err(BakeError::InvalidParameter(
                 "refinement must be positive".into(),
@@ -222,6 +227,15 @@ impl Bake {
             t = Instant::now();
         };
         let mesh = Mesh::new(scene, &params.mesh)?;
+        if params.solver == SolverKind::Direct
+            && mesh.element_count() > params.solver_params.max_direct
+        {
+            // Refuse now, before the form factors are spent.
+            return Err(BakeError::TooLargeForDirect {
+                elements: mesh.element_count(),
+                limit: params.solver_params.max_direct,
+            });
+        }
         lap(&mut times.meshing);
         let bvh = Bvh::new(&mesh.root_triangles_f32());
         lap(&mut times.visibility);
@@ -440,7 +454,11 @@ fn enclosed_elements(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<bool> 
                     + b * (r * phi.sin())
                     + node.normal * (1.0 - u1).max(0.0).sqrt();
                 if vis
-                    .closest_hit(node.centroid.as_vec3(), dir.as_vec3(), f32::INFINITY)
+                    .closest_hit(
+                        crate::form_factors::ray_origin(node.centroid, node.normal),
+                        dir.as_vec3(),
+                        f32::INFINITY,
+                    )
                     .is_some_and(|h| !h.front)
                 {
                     back += 1;

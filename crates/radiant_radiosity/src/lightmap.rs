@@ -2,7 +2,7 @@
 //! resolution), of which it uses the lower-left half; charts are packed in shelves with a one
 //! texel gutter. Each texel holds the radiosity at its centre, interpolated linearly between the
 //! element-grid vertices (vertex values are the means of the elements around them), so the map
-//! is smooth inside a chart and exact in the mean.
+//! is smooth inside a chart (the element values themselves are in `patches.csv`).
 
 use crate::mesh::Mesh;
 use crate::system::Rgb;

@@ -3,7 +3,7 @@
 //! A point or spot light of intensity `I` (candela) at distance `d` gives irradiance
 //! `E = I cos θ / d²`; a directional light of illuminance `E⊥` (lux) gives `E⊥ cos θ`. The
 //! radiosity it adds to an element, in emissive units, is `ρ E / π`. Range follows the glTF
-//! recommendation `clamp(1 - (d / range)⁴, 0, 1)² `; spot cones use glTF's smooth falloff.
+//! recommendation `clamp(1 - (d / range)⁴, 0, 1)`; spot cones use glTF's smooth falloff.
 
 use radiant_scene::{Light, LightKind};
 use radiant_visibility::Visibility;
@@ -44,7 +44,7 @@ pub fn direct_irradiance(mesh: &Mesh, lights: &[Light], vis: &dyn Visibility) ->
                     irr /= dist_world * dist_world;
                     if let Some(range) = light.range {
                         let q = (dist_world / range).powi(4);
-                        irr *= (1.0 - q).clamp(0.0, 1.0).powi(2);
+                        irr *= (1.0 - q).clamp(0.0, 1.0);
                     }
                 }
             }

@@ -11,6 +11,9 @@
 //!
 //! All accumulate in `f64`. The residual `r = S + ρKB − B` is reported as the area-weighted
 //! L2 norm relative to `B`; the unshot fraction is `‖r‖₁ / ‖S‖₁` (area-weighted, all channels).
+//! Southwell reports its unshot radiosity `‖ΔB‖ / ‖B‖` instead, which is the residual of its
+//! relaxed iterate (not of the displayed one, which already includes what was received) and
+//! costs nothing to keep; it stops on the unshot fraction.
 
 use std::time::{Duration, Instant};
 

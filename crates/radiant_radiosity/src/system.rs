@@ -1,6 +1,6 @@
 //! The discrete radiosity system over elements:
 //! `B_i = S_i + ρ_i Σ_links F_is B̄_s`, with `B̄_s` the area-weighted mean of `B` over the
-//! elements under source node `s`, and `S_i` emission plus direct light from punctual lights.
+//! elements under source node `s` (elements inside closed geometry weigh 0), and `S_i` emission plus direct light from punctual lights.
 
 use crate::links::Links;
 use crate::mesh::Mesh;

@@ -142,13 +142,25 @@ pub(crate) fn sample_triangle(v: &[DVec3; 3], r1: f64, r2: f64) -> DVec3 {
 
 /// Stratified sample `k` of `n` in the unit square, jittered by `rng`.
 #[inline]
+/// A perfect-square `n` gets an `m × m` jittered grid; any other `n` is stratified along the
+/// first coordinate only, so that every sample keeps the weight `1/n` without bias.
 fn stratified(k: u32, n: u32, rng: &mut Rng) -> (f64, f64) {
-    let m = (n as f64).sqrt().ceil() as u32;
-    let (i, j) = (k % m, k / m);
-    (
-        (i as f64 + rng.f64()) / m as f64,
-        ((j % m) as f64 + rng.f64()) / m as f64,
-    )
+    let m = (n as f64).sqrt().round() as u32;
+    if m * m == n {
+        let (i, j) = (k % m, k / m);
+        (
+            (i as f64 + rng.f64()) / m as f64,
+            (j as f64 + rng.f64()) / m as f64,
+        )
+    } else {
+        ((k as f64 + rng.f64()) / n as f64, rng.f64())
+    }
+}
+
+/// A ray origin just off an element's front face: far enough that rounding to `f32` cannot put
+/// it behind its own triangle (the local frame has unit extent), near enough to see everything.
+pub(crate) fn ray_origin(centroid: DVec3, normal: DVec3) -> glam::Vec3 {
+    (centroid + normal * 1e-5).as_vec3()
 }
 
 /// Fraction of `n` segments from `x` to stratified points on `node`'s triangle that are clear.
@@ -216,10 +228,13 @@ impl FormFactorMethod for RayCastMethod {
             // until each disc is small against its distance): the disc approximation
             // underestimates near sources.
             let by_size = (row.unoccluded[k] * 256.0).ceil().min(256.0) as u32;
-            let n = u32::from(row.samples[k])
+            let want = u32::from(row.samples[k])
                 .max(ctx.params.ray_cast_samples)
                 .max(by_size)
                 .max(1);
+            // A square number of samples gets a 2D stratified grid.
+            let side = (f64::from(want)).sqrt().ceil() as u32;
+            let n = side * side;
             let da = node.area / f64::from(n);
             let mut rng = Rng::new(hash(
                 ctx.params.seed ^ 0x5A5A,
@@ -268,10 +283,11 @@ impl FormFactorMethod for MonteCarloMethod {
             let (rad, phi) = (u1.sqrt(), std::f64::consts::TAU * u2);
             let z = (1.0 - u1).max(0.0).sqrt();
             let dir = t * (rad * phi.cos()) + b * (rad * phi.sin()) + r.normal * z;
-            let Some(hit) = ctx
-                .vis
-                .closest_hit(r.centroid.as_vec3(), dir.as_vec3(), f32::INFINITY)
-            else {
+            let Some(hit) = ctx.vis.closest_hit(
+                ray_origin(r.centroid, r.normal),
+                dir.as_vec3(),
+                f32::INFINITY,
+            ) else {
                 continue;
             };
             if !hit.front {
