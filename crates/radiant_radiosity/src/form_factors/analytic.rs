@@ -53,13 +53,14 @@ fn contour(n: DVec3, r: &[DVec3]) -> f64 {
     for k in 0..r.len() {
         let (a, b) = (r[k], r[(k + 1) % r.len()]);
         let c = a.cross(b);
-        let cl = c.length();
-        let scale = a.length() * b.length();
-        if cl.is_nan() || cl <= 1e-14 * scale {
+        let cl2 = c.length_squared();
+        // Compared squared: no square roots for the test (this is the hottest loop).
+        if cl2.is_nan() || cl2 <= 1e-28 * a.length_squared() * b.length_squared() {
             // Parallel: zero angle (outside the edge) or the point on the edge. Either way the
             // term is bounded; drop it.
             continue;
         }
+        let cl = cl2.sqrt();
         let gamma = cl.atan2(a.dot(b));
         sum += gamma * n.dot(c) / cl;
     }
