@@ -52,7 +52,7 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
     ensure_dir(&args.out)?;
 
     let mut csv = String::from(
-        "method,form_factors,t_s,iterations,rel_rms_error,max_rel_error,mean_rel_error,residual\n",
+        "method,form_factors,t_s,iterations,rel_rms_error,max_rel_error,residual,mean_rel_error\n",
     );
     let mut curves = Vec::new();
     let mut summary = Vec::new();
@@ -139,8 +139,8 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
                     r.iterations,
                     r.error.rel_rms,
                     r.error.max_rel,
-                    r.error.mean_rel,
-                    r.residual
+                    r.residual,
+                    r.error.mean_rel
                 );
             }
             // Time to 1 % mean error, if reached.

@@ -131,7 +131,7 @@ fn converge_writes_curves_for_each_combination() {
     assert_eq!(
         lines.next(),
         Some(
-            "method,form_factors,t_s,iterations,rel_rms_error,max_rel_error,mean_rel_error,residual"
+            "method,form_factors,t_s,iterations,rel_rms_error,max_rel_error,residual,mean_rel_error"
         )
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
