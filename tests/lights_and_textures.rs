@@ -564,3 +564,34 @@ fn external_image_in_slice_import_is_a_typed_error() {
         other => panic!("expected Invalid, got {other:?}"),
     }
 }
+
+#[test]
+fn degenerate_triangles_are_skipped_and_reported() {
+    // The floor plus a mesh whose two triangles are a good one and a collinear one.
+    let mut doc = floor_doc();
+    doc.light(
+        r#"{"name":"bulb","type":"point","color":[1,1,1],"intensity":10}"#.to_string(),
+        r#""translation":[0,2,0]"#,
+    );
+    let m = doc.material(diffuse("card", [0.5; 3], false));
+    let positions = [
+        [0.0, 1.0, 0.0],
+        [1.0, 1.0, 0.0],
+        [1.0, 1.0, 1.0],
+        [2.0, 1.0, 2.0],
+        [3.0, 1.0, 3.0],
+    ];
+    doc.mesh("card", &positions, &[0, 2, 1, 0, 3, 4], m);
+    let scene = doc.load().expect("scene loads");
+    assert_eq!(scene.stats.degenerate_triangles, 1);
+    let r = bake(&scene);
+    assert!(
+        r.report
+            .warnings
+            .iter()
+            .any(|w| w.contains("skipped 1 degenerate")),
+        "warnings: {:?}",
+        r.report.warnings
+    );
+    assert!(r.radiosity.iter().flatten().all(|v| v.is_finite()));
+}
