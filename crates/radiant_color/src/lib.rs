@@ -1,4 +1,5 @@
-//! Colour for Radiant: linear ↔ sRGB transfer functions and the tone-map operators' CPU reference.
+//! Colour for Radiant: CIE 1931 colorimetry ([`cie`]), linear ↔ sRGB transfer functions and the
+//! tone-map operators' CPU reference.
 //!
 //! Radiosity is solved in linear RGB (Rec. 709 primaries). Images that people look at are
 //! tone-mapped and then encoded with the sRGB transfer function (IEC 61966-2-1).
@@ -10,6 +11,8 @@
 //! let display = Tonemap::Reinhard.apply([4.0, 1.0, 0.0]);
 //! assert!(display[0] < 1.0);
 //! ```
+
+pub mod cie;
 
 /// sRGB electro-optical transfer: encoded value in [0, 1] → linear value (IEC 61966-2-1).
 ///
