@@ -41,6 +41,65 @@ pub fn reference_for(
     Ok(None)
 }
 
+/// Spectral materials: a side file, or the shipped measured spectra of the builtin Cornell box.
+fn spectral_materials(
+    scene: &SceneArgs,
+    file: Option<&Path>,
+) -> anyhow::Result<std::collections::HashMap<String, radiant::radiosity::spectral::SpectralMaterial>>
+{
+    let text = match file {
+        Some(p) => std::fs::read_to_string(p)
+            .with_context(|| format!("cannot read spectra {}", p.display()))?,
+        None if scene
+            .builtin
+            .as_deref()
+            .is_some_and(|b| b.starts_with("cornell")) =>
+        {
+            include_str!("../assets/cornell_box_spectra.json").to_string()
+        }
+        None => anyhow::bail!("--spectral needs --spectra FILE for this scene"),
+    };
+    let v: serde_json::Value =
+        serde_json::from_str(&text).context("spectra file is not valid JSON")?;
+    let spectrum = |m: &str,
+                    key: &str,
+                    s: &serde_json::Value|
+     -> anyhow::Result<radiant::color::cie::Spectrum> {
+        let nums = |k: &str| -> anyhow::Result<Vec<f64>> {
+            s[k].as_array()
+                .with_context(|| format!("material '{m}' {key}: no '{k}' array"))?
+                .iter()
+                .map(|x| {
+                    x.as_f64()
+                        .with_context(|| format!("material '{m}' {key}: '{k}' has a non-number"))
+                })
+                .collect()
+        };
+        radiant::color::cie::Spectrum::new(nums("wavelengths_nm")?, nums("values")?)
+            .map_err(|e| anyhow::anyhow!("material '{m}' {key}: {e}"))
+    };
+    let mut out = std::collections::HashMap::new();
+    for (name, m) in v["materials"]
+        .as_object()
+        .context("spectra file has no 'materials' object")?
+    {
+        let reflectance = spectrum(name, "reflectance", &m["reflectance"])?;
+        let emission = if m.get("emission").is_some() {
+            Some(spectrum(name, "emission", &m["emission"])?)
+        } else {
+            None
+        };
+        out.insert(
+            name.clone(),
+            radiant::radiosity::spectral::SpectralMaterial {
+                reflectance,
+                emission,
+            },
+        );
+    }
+    Ok(out)
+}
+
 /// A progress bar on a terminal; hidden otherwise.
 pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
     let pb = ProgressBar::new(len);
@@ -107,6 +166,54 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         None => None,
     };
     let out = &args.out;
+    let mut result = result;
+    let mut spectral_json = serde_json::Value::Null;
+    if args.spectral {
+        let t = std::time::Instant::now();
+        let materials = spectral_materials(&args.scene, args.spectra.as_deref())?;
+        let sp = radiant::radiosity::spectral::solve_spectral(
+            &result.system,
+            &result.mesh,
+            &scene.surfaces,
+            &materials,
+            args.bands,
+            params.solver_params.tolerance,
+        )?;
+        let seconds = t.elapsed().as_secs_f64();
+        // The difference from the RGB bake, per surface (relative, per channel).
+        let mut diffs = serde_json::Map::new();
+        let (mut worst, mut mean, mut area) = (0.0f64, 0.0, 0.0);
+        for (s, r) in sp.surfaces.iter().zip(&result.surfaces) {
+            if s.emitter {
+                continue;
+            }
+            let d: Vec<f64> = (0..3)
+                .map(|c| (s.mean[c] - r.mean[c]) / r.mean[c].abs().max(1e-12))
+                .collect();
+            worst = d.iter().fold(worst, |m, v| m.max(v.abs()));
+            mean += s.area * d.iter().map(|v| v.abs()).sum::<f64>() / 3.0;
+            area += s.area;
+            diffs.insert(s.name.clone(), json!(d));
+        }
+        let mean = if area > 0.0 { mean / area } else { 0.0 };
+        println!(
+            "spectral ({} bands, {seconds:.3} s): differs from the RGB bake by {:.1} % on average, {:.1} % at most",
+            sp.bands,
+            mean * 100.0,
+            worst * 100.0
+        );
+        spectral_json = json!({
+            "bands": sp.bands,
+            "seconds": seconds,
+            "relative_difference_from_rgb": { "mean": mean, "max": worst, "per_surface": diffs },
+        });
+        write_atomic(
+            &out.join("surfaces_rgb.csv"),
+            output::surfaces_csv(&result.surfaces).as_bytes(),
+        )?;
+        result.surfaces = sp.surfaces;
+        result.radiosity = sp.radiosity;
+    }
     write_atomic(
         &out.join("surfaces.csv"),
         output::surfaces_csv(&result.surfaces).as_bytes(),
@@ -128,7 +235,7 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         "threads": rayon::current_num_threads(),
         "lightmap": { "width": map.width, "height": map.height },
     });
-    let report = output::report_json(
+    let mut report = output::report_json(
         &source,
         &result.report,
         import_s,
@@ -136,6 +243,9 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         error.as_ref().map(|(n, e)| (n.as_str(), e)),
         extra,
     );
+    if !spectral_json.is_null() {
+        report["spectral"] = spectral_json;
+    }
     write_atomic(
         &out.join("report.json"),
         serde_json::to_string_pretty(&report)?.as_bytes(),

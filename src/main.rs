@@ -96,6 +96,17 @@ pub(crate) struct BakeArgs {
     /// box: the shipped Mitsuba 3 reference).
     #[arg(long)]
     pub(crate) reference: Option<PathBuf>,
+    /// Also solve in wavelength bands with measured spectra (the builtin Cornell box has them;
+    /// other scenes need --spectra), compare with the RGB bake in the report, and write the
+    /// spectral result as surfaces.csv (the RGB one goes to surfaces_rgb.csv).
+    #[arg(long)]
+    pub(crate) spectral: bool,
+    /// Wavelength bands over 400-700 nm for --spectral (3 to 96).
+    #[arg(long, default_value_t = 16)]
+    pub(crate) bands: usize,
+    /// Spectral materials side file (JSON, see assets/cornell_box_spectra.json) for --spectral.
+    #[arg(long)]
+    pub(crate) spectra: Option<PathBuf>,
     /// Width of the light-map atlas in texels (16 to 16384).
     #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(16..=16384))]
     pub(crate) lightmap_width: u32,

@@ -239,3 +239,53 @@ fn scene_without_emitters_says_so() {
     }
     let _ = std::fs::remove_dir_all(&out);
 }
+
+#[test]
+fn spectral_bake_compares_with_rgb() {
+    let out = tmp("spectral");
+    let st = radiant()
+        .args([
+            "bake",
+            "--builtin",
+            "cornell-box",
+            "--patch-size",
+            "0.3",
+            "--spectral",
+            "--bands",
+            "8",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(
+        st.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    assert!(String::from_utf8_lossy(&st.stdout).contains("spectral (8 bands"));
+    assert!(out.join("surfaces_rgb.csv").is_file());
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report"))
+            .expect("json");
+    assert_eq!(report["spectral"]["bands"], 8);
+    assert!(
+        report["spectral"]["relative_difference_from_rgb"]["mean"]
+            .as_f64()
+            .expect("mean")
+            .is_finite()
+    );
+    // Spectral needs spectra: a scene file without --spectra is a clear error.
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/bad_inputs");
+    let st = radiant()
+        .arg("bake")
+        .arg(dir.join("ok_no_emitters.gltf"))
+        .arg("--spectral")
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(!st.status.success());
+    assert!(String::from_utf8_lossy(&st.stderr).contains("--spectra"));
+    let _ = std::fs::remove_dir_all(&out);
+}

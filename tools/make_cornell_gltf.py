@@ -92,3 +92,20 @@ gltf = {
 }
 out.write_text(json.dumps(gltf, indent=1) + "\n")
 print(f"wrote {out} ({len(data['quads'])} quads)")
+
+# The measured spectra, as the side file `radiant bake --spectral` reads (assets/cornell_box_spectra.json).
+sp = data["spectra"]
+side = {
+    "source": "Cornell PCG 'Cornell Box Data': measured reflectances 400-700 nm at 4 nm; the light's relative spectral power at 400/500/600/700 nm. Reflectance of the light: bitterli's 0.78, flat. Emission spectra are relative: a bake scales each to the luminance of the material's RGB emission.",
+    "materials": {
+        "white": {"reflectance": {"wavelengths_nm": sp["wavelengths_nm"], "values": sp["white"]}},
+        "red": {"reflectance": {"wavelengths_nm": sp["wavelengths_nm"], "values": sp["red"]}},
+        "green": {"reflectance": {"wavelengths_nm": sp["wavelengths_nm"], "values": sp["green"]}},
+        "light": {
+            "reflectance": {"wavelengths_nm": [400, 700], "values": [0.78, 0.78]},
+            "emission": {"wavelengths_nm": sp["light_wavelengths_nm"], "values": sp["light_relative_spd"]},
+        },
+    },
+}
+(root / "assets/cornell_box_spectra.json").write_text(json.dumps(side, indent=1) + "\n")
+print("wrote assets/cornell_box_spectra.json")

@@ -30,6 +30,7 @@ pub mod metrics;
 pub mod rng;
 pub mod scenes;
 pub mod solvers;
+pub mod spectral;
 pub mod system;
 
 pub use bake::{Bake, BakeEvent, BakeParams, BakeReport, BakeResult, PhaseTimes, TimelinePoint};

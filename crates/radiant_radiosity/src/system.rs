@@ -161,6 +161,18 @@ impl System {
             .fold(0.0, f64::max)
     }
 
+    /// The same links with other reflectance and source terms (another wavelength band, an
+    /// edited material): form factors do not depend on colour.
+    pub fn with_materials(&self, rho: Vec<Rgb>, source: Vec<Rgb>) -> System {
+        let mut sys = System {
+            rho,
+            source,
+            ..self.clone()
+        };
+        sys.contraction = sys.compute_contraction();
+        sys
+    }
+
     /// Number of elements.
     pub fn len(&self) -> usize {
         self.area.len()
