@@ -121,6 +121,12 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     let reference = reference_for(&args.scene, args.reference.as_deref())?;
     let (scene, source) = load_scene(&args.scene)?;
     let import_s = start.elapsed().as_secs_f64();
+    // Spectral mode solves emission per band; punctual lights have only RGB colours so far.
+    anyhow::ensure!(
+        !args.spectral || scene.lights.is_empty(),
+        "--spectral does not handle punctual lights yet ({} in this scene)",
+        scene.lights.len()
+    );
     if let Some((name, rows)) = &reference {
         // Check before baking, not after: a reference for another scene is a mistake.
         let known = scene

@@ -78,7 +78,8 @@ fn band_cmf(bands: usize) -> Vec<[f64; 3]> {
 }
 
 /// Solves the system's links in `bands` bands with the given spectral materials (by material
-/// name; every surface needs one), to `tolerance`.
+/// name; every surface needs one), to `tolerance`. Only emissive surfaces light a spectral
+/// solve: direct light from punctual lights (RGB only) is not carried over.
 pub fn solve_spectral(
     system: &System,
     mesh: &Mesh,
