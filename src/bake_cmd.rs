@@ -208,8 +208,12 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
             mean * 100.0,
             worst * 100.0
         );
+        if !sp.converged {
+            println!("warning: a spectral band stopped converging");
+        }
         spectral_json = json!({
             "bands": sp.bands,
+            "converged": sp.converged,
             "seconds": seconds,
             "relative_difference_from_rgb": { "mean": mean, "max": worst, "per_surface": diffs },
         });

@@ -120,15 +120,19 @@ fn parse_table(text: &str) -> Vec<(f64, Vec<f64>)> {
         .collect()
 }
 
+/// Rows of `wavelength, a, b, c`; rows with fewer numbers are skipped.
+fn triples(text: &str) -> Vec<(f64, [f64; 3])> {
+    parse_table(text)
+        .into_iter()
+        .filter(|(_, v)| v.len() >= 3)
+        .map(|(w, v)| (w, [v[0], v[1], v[2]]))
+        .collect()
+}
+
 /// The CIE 1931 2° colour-matching functions x̄ȳz̄, 360–830 nm at 1 nm.
 pub fn cmf_xyz() -> &'static [(f64, [f64; 3])] {
     static T: OnceLock<Vec<(f64, [f64; 3])>> = OnceLock::new();
-    T.get_or_init(|| {
-        parse_table(include_str!("../data/cie1931_xyz_cmf_1nm.csv"))
-            .into_iter()
-            .map(|(w, v)| (w, [v[0], v[1], v[2]]))
-            .collect()
-    })
+    T.get_or_init(|| triples(include_str!("../data/cie1931_xyz_cmf_1nm.csv")))
 }
 
 /// The CIE 1931 RGB colour-matching functions r̄ḡb̄ (primaries 700, 546.1, 435.8 nm), 380–780 nm
@@ -136,12 +140,7 @@ pub fn cmf_xyz() -> &'static [(f64, [f64; 3])] {
 /// wavelengths needs red light added to the test side.
 pub fn cmf_rgb() -> &'static [(f64, [f64; 3])] {
     static T: OnceLock<Vec<(f64, [f64; 3])>> = OnceLock::new();
-    T.get_or_init(|| {
-        parse_table(include_str!("../data/cie1931_rgb_cmf_5nm.csv"))
-            .into_iter()
-            .map(|(w, v)| (w, [v[0], v[1], v[2]]))
-            .collect()
-    })
+    T.get_or_init(|| triples(include_str!("../data/cie1931_rgb_cmf_5nm.csv")))
 }
 
 /// CIE standard illuminant D65 (relative spectral power, 300–830 nm at 5 nm).

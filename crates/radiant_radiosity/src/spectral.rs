@@ -41,6 +41,8 @@ pub struct SpectralResult {
     pub xyz: Vec<Rgb>,
     /// Per surface means of the linear sRGB.
     pub surfaces: Vec<SurfaceMean>,
+    /// Whether every band's solve met the tolerance (false: one stopped making progress).
+    pub converged: bool,
 }
 
 const LO: f64 = 400.0;
@@ -136,6 +138,7 @@ pub fn solve_spectral(
         tolerance,
         ..Default::default()
     };
+    let mut converged = true;
     for first in (0..bands).step_by(3) {
         let pick = |b: usize| (first + b).min(bands - 1);
         let rho: Vec<Rgb> = surface_of
@@ -148,11 +151,22 @@ pub fn solve_spectral(
             .collect();
         let sys = system.with_materials(rho, source);
         let mut gs = GaussSeidel::new(&sys, params);
-        let mut p = gs.step(&sys, Duration::from_secs(60))?;
-        let mut guard = 0;
-        while !p.converged && guard < 100 {
-            p = gs.step(&sys, Duration::from_secs(60))?;
-            guard += 1;
+        // The same stopping rule as a bake: converged, or no progress for STALL_STEPS steps.
+        let (mut best, mut since_best) = (f64::INFINITY, 0u32);
+        loop {
+            let p = gs.step(&sys, Duration::from_millis(25))?;
+            if p.converged {
+                break;
+            }
+            if p.residual < 0.99 * best {
+                (best, since_best) = (p.residual, 0);
+            } else {
+                since_best += 1;
+            }
+            if since_best >= crate::bake::STALL_STEPS || !p.residual.is_finite() {
+                converged = false;
+                break;
+            }
         }
         let b = gs.radiosity(&sys);
         for (k, band) in (first..(first + 3).min(bands)).enumerate() {
@@ -171,5 +185,6 @@ pub fn solve_spectral(
         radiosity,
         xyz,
         surfaces,
+        converged,
     })
 }

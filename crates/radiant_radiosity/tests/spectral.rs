@@ -95,6 +95,7 @@ fn measured_cornell_spectra_bake() {
     let sp = solve_spectral(&r.system, &r.mesh, &scene.surfaces, &materials, 16, 1e-6)
         .expect("spectral");
     assert!(sp.xyz.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
+    assert!(sp.converged);
     // The red wall is red and the green wall green in the spectral result too.
     let mean = |n: &str| {
         sp.surfaces
