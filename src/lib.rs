@@ -4,7 +4,9 @@
 //! This facade re-exports the workspace's crates:
 //! - [`scene`]: glTF import with validation, the builtin Cornell box;
 //! - [`radiosity`]: meshing, form factors, solvers, error metrics, light maps (pure CPU);
-//! - [`color`]: sRGB transfer functions and tone-map operators.
+//! - [`color`]: sRGB transfer functions, CIE colorimetry and tone-map operators;
+//! - [`render`] and [`post`] (feature `render`, on by default): the wgpu render graph, passes,
+//!   post-processing and offscreen capture.
 //!
 //! ```
 //! use radiant::radiosity::{Bake, BakeParams};
@@ -16,5 +18,47 @@
 //! ```
 
 pub use radiant_color as color;
+#[cfg(feature = "render")]
+pub use radiant_post as post;
 pub use radiant_radiosity as radiosity;
+#[cfg(feature = "render")]
+pub use radiant_render as render;
 pub use radiant_scene as scene;
+
+/// Glue from a radiosity bake to the renderer's light map (until the ECS crate owns it).
+#[cfg(feature = "render")]
+pub mod bridge {
+    use radiant_radiosity::BakeResult;
+    use radiant_render::scene::RenderScene;
+    use radiant_scene::Scene;
+
+    /// Fills `render_scene`'s light map (made by `RenderScene::from_scene(scene, ..)`) with the
+    /// bake's incident radiance `H = (B − E) / ρ` of the element under each texel, so the
+    /// renderer's `albedo × H + E` reproduces the baked radiosity `B`.
+    pub fn fill_lightmap_from_bake(
+        render_scene: &mut RenderScene,
+        scene: &Scene,
+        bake: &BakeResult,
+    ) {
+        render_scene.fill_lightmap(|t| {
+            let Some(tri) = scene.triangles.get(t.triangle) else {
+                return [0.0; 3];
+            };
+            let surface = &scene.surfaces[tri.surface as usize];
+            let e = bake
+                .mesh
+                .locate(t.triangle as u32, f64::from(t.u), f64::from(t.v));
+            let Some(b) = bake.radiosity.get(e as usize) else {
+                return [0.0; 3];
+            };
+            [0, 1, 2].map(|c| {
+                let rho = surface.reflectance[c];
+                if rho > 1e-6 {
+                    (((b[c] - surface.emission[c]) / rho).max(0.0)) as f32
+                } else {
+                    0.0
+                }
+            })
+        });
+    }
+}

@@ -13,6 +13,9 @@
 //! ```
 
 pub mod cie;
+mod tonemap;
+
+pub use tonemap::Tonemap;
 
 /// sRGB electro-optical transfer: encoded value in [0, 1] → linear value (IEC 61966-2-1).
 ///
@@ -51,42 +54,6 @@ pub fn linear_to_srgb8(linear: f64) -> u8 {
 /// Relative luminance of a linear Rec. 709 colour (Y of CIE XYZ).
 pub fn luminance(rgb: [f64; 3]) -> f64 {
     0.212_639 * rgb[0] + 0.715_169 * rgb[1] + 0.072_192 * rgb[2]
-}
-
-/// Tone-map operators: linear HDR → linear display range [0, 1], before sRGB encoding.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
-pub enum Tonemap {
-    /// Clamp each channel to [0, 1].
-    Clamp,
-    /// Reinhard, per channel: `x / (1 + x)`.
-    Reinhard,
-    /// ACES filmic curve, Narkowicz's 2015 fit.
-    #[default]
-    AcesFitted,
-}
-
-impl Tonemap {
-    /// Applies the operator to one linear colour; NaN maps to 0.
-    pub fn apply(self, rgb: [f64; 3]) -> [f64; 3] {
-        rgb.map(|x| {
-            let x = if x.is_finite() {
-                x.max(0.0)
-            } else if x == f64::INFINITY {
-                f64::MAX
-            } else {
-                0.0
-            };
-            match self {
-                Tonemap::Clamp => x.min(1.0),
-                Tonemap::Reinhard => x / (1.0 + x),
-                Tonemap::AcesFitted => {
-                    let (a, b, c, d, e) = (2.51, 0.03, 2.43, 0.59, 0.14);
-                    let x = x.min(1e6);
-                    ((x * (a * x + b)) / (x * (c * x + d) + e)).clamp(0.0, 1.0)
-                }
-            }
-        })
-    }
 }
 
 #[cfg(test)]

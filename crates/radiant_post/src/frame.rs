@@ -1,0 +1,440 @@
+//! The standard frame: G-buffer → [SSAO] → lighting → [bloom] → tone mapping → [blur] → [Sobel].
+//!
+//! Bracketed effects are `Option`s in [`FrameSettings`]: `None` means their passes are never
+//! added, so the compiled graph has neither their passes nor their textures. The graph is
+//! rebuilt only when the size, the target format, the settings or the scene change; otherwise
+//! a frame reuses the compiled graph and its pooled textures and allocates nothing.
+
+use std::sync::Arc;
+
+use radiant_render::capture::{Image, read_texture};
+use radiant_render::gbuffer::{GBufferPipeline, gbuffer_pass};
+use radiant_render::graph::{
+    CompiledGraph, GraphReport, PassTimings, RenderGraph, TextureDesc, TextureHandle, TexturePool,
+};
+use radiant_render::lighting::{DebugView, LightingPipeline, lighting_pass};
+use radiant_render::scene::{GpuScene, RenderScene};
+use radiant_render::ssao::{AO_FORMAT, Ssao, SsaoPipeline, ssao_pass};
+use radiant_render::{GpuContext, RenderError, Requirements};
+
+use crate::bloom::{BLOOM_FORMAT, Bloom, BloomPipeline, bloom_pass};
+use crate::blur::{BlurPipeline, GaussianBlur, gaussian_blur};
+use crate::sobel::{Sobel, SobelInputs, SobelPipeline, sobel_pass};
+use crate::tonemapping::{Tonemapping, TonemappingPipeline, tonemapping_pass};
+
+/// Every setting of the frame. An effect that is `None` is left out entirely.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameSettings {
+    /// Exposure and tone-map operator.
+    pub tonemapping: Tonemapping,
+    /// Bloom, if on (default: on).
+    pub bloom: Option<Bloom>,
+    /// SSAO, if on (default: on).
+    pub ssao: Option<Ssao>,
+    /// Sobel edge overlay, if on (default: off).
+    pub sobel: Option<Sobel>,
+    /// Gaussian blur of the final image, if on (default: off).
+    pub blur: Option<GaussianBlur>,
+    /// What the lighting pass outputs (default: the lit image).
+    pub debug_view: DebugView,
+}
+
+impl Default for FrameSettings {
+    fn default() -> Self {
+        Self {
+            tonemapping: Tonemapping::default(),
+            bloom: Some(Bloom::default()),
+            ssao: Some(Ssao::default()),
+            sobel: None,
+            blur: None,
+            debug_view: DebugView::Lit,
+        }
+    }
+}
+
+impl FrameSettings {
+    /// Only what every frame needs: G-buffer, lighting, tone mapping.
+    pub const MINIMAL: FrameSettings = FrameSettings {
+        tonemapping: Tonemapping {
+            operator: radiant_color::Tonemap::AcesFitted,
+            exposure: 0.0,
+        },
+        bloom: None,
+        ssao: None,
+        sobel: None,
+        blur: None,
+        debug_view: DebugView::Lit,
+    };
+
+    /// Checks every enabled effect's fields.
+    pub fn validate(&self) -> Result<(), RenderError> {
+        self.tonemapping.validate()?;
+        if let Some(b) = &self.bloom {
+            b.validate()?;
+        }
+        if let Some(s) = &self.ssao {
+            s.validate()?;
+        }
+        if let Some(s) = &self.sobel {
+            s.validate()?;
+        }
+        if let Some(b) = &self.blur {
+            b.validate()?;
+        }
+        Ok(())
+    }
+}
+
+/// The pipelines of every pass, compiled once per device.
+#[derive(Clone)]
+pub struct FramePipelines {
+    gbuffer: Arc<GBufferPipeline>,
+    lighting: Arc<LightingPipeline>,
+    ssao: Arc<SsaoPipeline>,
+    tonemapping: Arc<TonemappingPipeline>,
+    bloom: Arc<BloomPipeline>,
+    blur: Arc<BlurPipeline>,
+    sobel: Arc<SobelPipeline>,
+}
+
+impl FramePipelines {
+    /// Compiles them.
+    pub fn new(gpu: &GpuContext) -> Self {
+        let blur = Arc::new(BlurPipeline::new(&gpu.device));
+        Self {
+            gbuffer: Arc::new(GBufferPipeline::new(&gpu.device)),
+            lighting: Arc::new(LightingPipeline::new(&gpu.device, &gpu.queue)),
+            ssao: Arc::new(SsaoPipeline::new(&gpu.device)),
+            tonemapping: Arc::new(TonemappingPipeline::new(&gpu.device)),
+            bloom: Arc::new(BloomPipeline::new(&gpu.device, blur.clone())),
+            blur,
+            sobel: Arc::new(SobelPipeline::new(&gpu.device)),
+        }
+    }
+}
+
+/// Which optional effects this adapter can run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct EffectSupport {
+    /// SSAO renders to R8Unorm.
+    pub ssao: bool,
+    /// Bloom renders to Rgba16Float.
+    pub bloom: bool,
+}
+
+struct Compiled {
+    key: FrameKey,
+    graph: CompiledGraph,
+    hdr: TextureHandle,
+}
+
+#[derive(Clone, PartialEq)]
+struct FrameKey {
+    width: u32,
+    height: u32,
+    format: wgpu::TextureFormat,
+    settings: FrameSettings,
+    scene_generation: u64,
+}
+
+/// One frame's outputs read back to the CPU.
+pub struct Capture {
+    /// The tone-mapped image as stored (sRGB-encoded values in [0, 1]).
+    pub ldr: Image,
+    /// Linear HDR radiance before tone mapping (after bloom, when on).
+    pub hdr: Image,
+}
+
+/// Draws [`RenderScene`]s through the standard frame into any target.
+pub struct FrameRenderer {
+    pipelines: FramePipelines,
+    support: EffectSupport,
+    scene: Arc<GpuScene>,
+    near_far: [f32; 2],
+    scene_generation: u64,
+    pool: TexturePool,
+    compiled: Option<Compiled>,
+    compiles: u64,
+}
+
+impl FrameRenderer {
+    /// Compiles the pipelines, checks what the adapter supports, and uploads `scene`.
+    pub fn new(gpu: &GpuContext, scene: &RenderScene) -> Result<Self, RenderError> {
+        gpu.check(&radiant_render::lighting::requirements())
+            .map_err(|reason| RenderError::Unsupported {
+                pass: "lighting_pass",
+                reason,
+            })?;
+        let mut support = EffectSupport {
+            ssao: true,
+            bloom: true,
+        };
+        if let Err(reason) = gpu.check(&Requirements {
+            render_formats: vec![(AO_FORMAT, false)],
+            ..Default::default()
+        }) {
+            tracing::warn!("SSAO disabled on this adapter: {reason}");
+            support.ssao = false;
+        }
+        if let Err(reason) = gpu.check(&Requirements {
+            render_formats: vec![(BLOOM_FORMAT, false)],
+            ..Default::default()
+        }) {
+            tracing::warn!("bloom disabled on this adapter: {reason}");
+            support.bloom = false;
+        }
+        let pipelines = FramePipelines::new(gpu);
+        let gpu_scene = GpuScene::upload(gpu, scene)?;
+        gpu.take_errors()?;
+        Ok(Self {
+            pipelines,
+            support,
+            scene: Arc::new(gpu_scene),
+            near_far: [scene.camera.near, scene.camera.far],
+            scene_generation: 0,
+            pool: TexturePool::new(),
+            compiled: None,
+            compiles: 0,
+        })
+    }
+
+    /// Replaces the scene (the graph recompiles on the next frame).
+    pub fn set_scene(&mut self, gpu: &GpuContext, scene: &RenderScene) -> Result<(), RenderError> {
+        self.scene = Arc::new(GpuScene::upload(gpu, scene)?);
+        self.near_far = [scene.camera.near, scene.camera.far];
+        self.scene_generation += 1;
+        Ok(())
+    }
+
+    /// What the adapter can run.
+    pub fn support(&self) -> EffectSupport {
+        self.support
+    }
+
+    /// How many times the graph has been compiled.
+    pub fn compiles(&self) -> u64 {
+        self.compiles
+    }
+
+    /// How many GPU textures the pool has ever created.
+    pub fn textures_created(&self) -> usize {
+        self.pool.created()
+    }
+
+    /// The current compiled graph's passes, textures and bytes.
+    pub fn report(&self) -> Option<&GraphReport> {
+        self.compiled.as_ref().map(|c| c.graph.report())
+    }
+
+    /// Builds the frame's graph (not compiled). `target` is the imported output.
+    pub fn build_graph(
+        &self,
+        device: &wgpu::Device,
+        width: u32,
+        height: u32,
+        format: wgpu::TextureFormat,
+        settings: &FrameSettings,
+    ) -> Result<(RenderGraph, TextureHandle), RenderError> {
+        let p = &self.pipelines;
+        let mut g = RenderGraph::new();
+        let target = g.import(
+            "frame_target",
+            TextureDesc {
+                width,
+                height,
+                format,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            },
+        );
+        let gb = gbuffer_pass(&mut g, width, height, p.gbuffer.clone(), self.scene.clone());
+        let ao = match settings.ssao {
+            Some(s) if self.support.ssao => Some(ssao_pass(
+                &mut g,
+                &gb,
+                &s,
+                p.ssao.clone(),
+                self.scene.clone(),
+                device,
+            )),
+            Some(_) => {
+                tracing::warn!("SSAO requested but unsupported here: skipped");
+                None
+            }
+            None => None,
+        };
+        let lit = lighting_pass(
+            &mut g,
+            &gb,
+            ao,
+            settings.debug_view,
+            p.lighting.clone(),
+            self.scene.clone(),
+            device,
+        );
+        let hdr = match settings.bloom {
+            Some(b) if self.support.bloom => bloom_pass(&mut g, lit, &b, &p.bloom, device),
+            Some(_) => {
+                tracing::warn!("bloom requested but unsupported here: skipped");
+                lit
+            }
+            None => lit,
+        };
+        g.export(hdr);
+        if settings.blur.is_none() && settings.sobel.is_none() {
+            tonemapping_pass(
+                &mut g,
+                hdr,
+                target,
+                &settings.tonemapping,
+                &p.tonemapping,
+                device,
+            );
+            return Ok((g, hdr));
+        }
+        let ldr = g.create(
+            "ldr",
+            TextureDesc::new(width, height, wgpu::TextureFormat::Rgba8UnormSrgb),
+        );
+        tonemapping_pass(
+            &mut g,
+            hdr,
+            ldr,
+            &settings.tonemapping,
+            &p.tonemapping,
+            device,
+        );
+        let mut current = ldr;
+        if let Some(b) = &settings.blur {
+            let out = settings.sobel.is_none().then_some(target);
+            current = gaussian_blur(&mut g, current, b, out, &p.blur, device);
+        }
+        if let Some(s) = &settings.sobel {
+            let inputs = SobelInputs {
+                color: current,
+                depth: Some(gb.depth),
+                normal: Some(gb.normal),
+                near_far: self.near_far,
+            };
+            sobel_pass(&mut g, inputs, s, Some(target), &p.sobel, device)?;
+        }
+        Ok((g, hdr))
+    }
+
+    fn prepare(
+        &mut self,
+        gpu: &GpuContext,
+        width: u32,
+        height: u32,
+        format: wgpu::TextureFormat,
+        settings: &FrameSettings,
+    ) -> Result<(), RenderError> {
+        let max = gpu.device.limits().max_texture_dimension_2d;
+        if width == 0 || height == 0 || width > max || height > max {
+            return Err(RenderError::InvalidSize { width, height, max });
+        }
+        settings.validate()?;
+        let key = FrameKey {
+            width,
+            height,
+            format,
+            settings: *settings,
+            scene_generation: self.scene_generation,
+        };
+        if self.compiled.as_ref().is_some_and(|c| c.key == key) {
+            return Ok(());
+        }
+        if let Some(old) = self.compiled.take() {
+            self.pool.release(old.graph);
+        }
+        let (graph, hdr) = self.build_graph(&gpu.device, width, height, format, settings)?;
+        let graph = graph.compile()?.realize(&gpu.device, &mut self.pool);
+        // Textures the new graph did not take back are freed now, not kept.
+        self.pool.trim();
+        self.compiles += 1;
+        tracing::debug!("frame graph compiled: {}", graph.report());
+        self.compiled = Some(Compiled { key, graph, hdr });
+        Ok(())
+    }
+
+    /// Renders one frame into `target` (a view of a `width × height` texture of `format`).
+    /// Does not wait for the GPU.
+    pub fn render(
+        &mut self,
+        gpu: &GpuContext,
+        target: &wgpu::TextureView,
+        width: u32,
+        height: u32,
+        format: wgpu::TextureFormat,
+        settings: &FrameSettings,
+    ) -> Result<(), RenderError> {
+        self.prepare(gpu, width, height, format, settings)?;
+        self.scene.update_camera(&gpu.queue, width, height);
+        let Some(c) = &self.compiled else {
+            return Err(RenderError::Graph("no compiled graph".into()));
+        };
+        c.graph.execute(gpu, &[target])
+    }
+
+    /// Renders one frame and measures each pass (GPU timestamps where available).
+    pub fn render_timed(
+        &mut self,
+        gpu: &GpuContext,
+        target: &wgpu::TextureView,
+        width: u32,
+        height: u32,
+        format: wgpu::TextureFormat,
+        settings: &FrameSettings,
+    ) -> Result<PassTimings, RenderError> {
+        self.prepare(gpu, width, height, format, settings)?;
+        self.scene.update_camera(&gpu.queue, width, height);
+        let Some(c) = &self.compiled else {
+            return Err(RenderError::Graph("no compiled graph".into()));
+        };
+        let t = c.graph.execute_timed(gpu, &[target])?;
+        gpu.take_errors()?;
+        Ok(t)
+    }
+
+    /// The linear HDR image of the last frame (before tone mapping).
+    pub fn hdr_texture(&self) -> Option<&wgpu::Texture> {
+        self.compiled.as_ref().and_then(|c| c.graph.texture(c.hdr))
+    }
+
+    /// Renders offscreen at `width × height` and reads back the tone-mapped and HDR images.
+    pub fn capture(
+        &mut self,
+        gpu: &GpuContext,
+        width: u32,
+        height: u32,
+        settings: &FrameSettings,
+    ) -> Result<Capture, RenderError> {
+        let format = wgpu::TextureFormat::Rgba8UnormSrgb;
+        let max = gpu.device.limits().max_texture_dimension_2d;
+        if width == 0 || height == 0 || width > max || height > max {
+            return Err(RenderError::InvalidSize { width, height, max });
+        }
+        let target = gpu.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("capture_target"),
+            size: wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let view = target.create_view(&Default::default());
+        self.render(gpu, &view, width, height, format, settings)?;
+        gpu.take_errors()?;
+        let ldr = read_texture(gpu, &target)?;
+        let hdr_tex = self
+            .hdr_texture()
+            .ok_or_else(|| RenderError::Graph("no HDR texture".into()))?;
+        let hdr = read_texture(gpu, hdr_tex)?;
+        Ok(Capture { ldr, hdr })
+    }
+}

@@ -1,0 +1,215 @@
+//! Offscreen capture: read a texture back (rows padded to 256 bytes on the GPU side), and write
+//! PNG (tone-mapped, 8-bit sRGB) or EXR (linear, 32-bit float).
+
+use std::path::Path;
+
+use crate::{GpuContext, RenderError};
+
+/// A texture read back to the CPU, as RGBA f32 per texel (stored values: no sRGB decoding).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    /// Width in texels.
+    pub width: u32,
+    /// Height in texels.
+    pub height: u32,
+    /// Row-major, top row first.
+    pub texels: Vec<[f32; 4]>,
+}
+
+impl Image {
+    /// The texel at (x, y).
+    pub fn at(&self, x: u32, y: u32) -> [f32; 4] {
+        self.texels[(y * self.width + x) as usize]
+    }
+
+    /// Quantises stored [0, 1] values to 8 bits per channel (for textures that hold encoded
+    /// sRGB already, such as the tone-mapped target).
+    pub fn to_rgba8(&self) -> Vec<u8> {
+        self.texels
+            .iter()
+            .flat_map(|t| t.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8))
+            .collect()
+    }
+}
+
+/// Waits for a mappable buffer and copies its contents out.
+pub fn read_buffer(gpu: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, RenderError> {
+    let slice = buffer.slice(..);
+    let (tx, rx) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    gpu.device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| RenderError::Readback(e.to_string()))?;
+    rx.recv()
+        .map_err(|e| RenderError::Readback(e.to_string()))?
+        .map_err(|e| RenderError::Readback(e.to_string()))?;
+    let data = slice
+        .get_mapped_range()
+        .map_err(|e| RenderError::Readback(e.to_string()))?
+        .to_vec();
+    buffer.unmap();
+    Ok(data)
+}
+
+/// Bytes per texel of the formats capture understands.
+fn texel_bytes(format: wgpu::TextureFormat) -> Option<u32> {
+    use wgpu::TextureFormat as F;
+    Some(match format {
+        F::Rgba8Unorm | F::Rgba8UnormSrgb | F::Bgra8Unorm | F::Bgra8UnormSrgb => 4,
+        F::R8Unorm => 1,
+        F::R16Float => 2,
+        F::R32Float | F::Depth32Float => 4,
+        F::Rg16Float => 4,
+        F::Rgba16Float => 8,
+        F::Rgba32Float => 16,
+        _ => return None,
+    })
+}
+
+/// IEEE 754 binary16 → f32.
+pub fn f16_to_f32(h: u16) -> f32 {
+    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
+    let exp = i32::from((h >> 10) & 0x1f);
+    let frac = f32::from(h & 0x3ff);
+    match exp {
+        0 => sign * frac * (2.0f32).powi(-24),
+        31 if frac == 0.0 => sign * f32::INFINITY,
+        31 => f32::NAN,
+        _ => sign * (1.0 + frac / 1024.0) * (2.0f32).powi(exp - 15),
+    }
+}
+
+/// Copies a whole 2D texture (mip 0) to the CPU.
+pub fn read_texture(gpu: &GpuContext, texture: &wgpu::Texture) -> Result<Image, RenderError> {
+    let (w, h, format) = (texture.width(), texture.height(), texture.format());
+    let bpp = texel_bytes(format)
+        .ok_or_else(|| RenderError::Readback(format!("cannot read back {format:?}")))?;
+    let unpadded = w * bpp;
+    let padded =
+        unpadded.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("capture_readback"),
+        size: u64::from(padded) * u64::from(h),
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("capture"),
+        });
+    encoder.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(padded),
+                rows_per_image: Some(h),
+            },
+        },
+        wgpu::Extent3d {
+            width: w,
+            height: h,
+            depth_or_array_layers: 1,
+        },
+    );
+    gpu.queue.submit([encoder.finish()]);
+    let raw = read_buffer(gpu, &buffer)?;
+    gpu.take_errors()?;
+    let mut texels = Vec::with_capacity((w * h) as usize);
+    for y in 0..h {
+        let row = &raw[(y * padded) as usize..(y * padded + unpadded) as usize];
+        for px in row.chunks_exact(bpp as usize) {
+            texels.push(decode(format, px));
+        }
+    }
+    Ok(Image {
+        width: w,
+        height: h,
+        texels,
+    })
+}
+
+fn decode(format: wgpu::TextureFormat, px: &[u8]) -> [f32; 4] {
+    use wgpu::TextureFormat as F;
+    let f16 = |i: usize| f16_to_f32(u16::from_le_bytes([px[2 * i], px[2 * i + 1]]));
+    let f32_ =
+        |i: usize| f32::from_le_bytes([px[4 * i], px[4 * i + 1], px[4 * i + 2], px[4 * i + 3]]);
+    let u8_ = |i: usize| f32::from(px[i]) / 255.0;
+    match format {
+        F::Rgba8Unorm | F::Rgba8UnormSrgb => [u8_(0), u8_(1), u8_(2), u8_(3)],
+        F::Bgra8Unorm | F::Bgra8UnormSrgb => [u8_(2), u8_(1), u8_(0), u8_(3)],
+        F::R8Unorm => [u8_(0), 0.0, 0.0, 1.0],
+        F::R16Float => [f16(0), 0.0, 0.0, 1.0],
+        F::Rg16Float => [f16(0), f16(1), 0.0, 1.0],
+        F::R32Float | F::Depth32Float => [f32_(0), 0.0, 0.0, 1.0],
+        F::Rgba16Float => [f16(0), f16(1), f16(2), f16(3)],
+        _ => [f32_(0), f32_(1), f32_(2), f32_(3)],
+    }
+}
+
+fn write_atomically(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), RenderError>,
+) -> Result<(), RenderError> {
+    let tmp = path.with_extension(format!(
+        "{}.tmp",
+        path.extension().and_then(|e| e.to_str()).unwrap_or("out")
+    ));
+    write(&tmp)?;
+    std::fs::rename(&tmp, path)?;
+    Ok(())
+}
+
+/// Writes an 8-bit PNG of an image whose stored values are display-encoded (the tone-mapped
+/// target), alpha forced opaque.
+pub fn write_png(path: &Path, img: &Image) -> Result<(), RenderError> {
+    let mut rgba = img.to_rgba8();
+    for px in rgba.chunks_exact_mut(4) {
+        px[3] = 255;
+    }
+    let buf = image::RgbaImage::from_raw(img.width, img.height, rgba)
+        .ok_or_else(|| RenderError::Image("image size mismatch".into()))?;
+    write_atomically(path, |tmp| {
+        buf.save_with_format(tmp, image::ImageFormat::Png)
+            .map_err(|e| RenderError::Image(e.to_string()))
+    })
+}
+
+/// Writes a linear 32-bit float OpenEXR of an HDR image (alpha forced to 1).
+pub fn write_exr(path: &Path, img: &Image) -> Result<(), RenderError> {
+    let data: Vec<f32> = img
+        .texels
+        .iter()
+        .flat_map(|t| [t[0], t[1], t[2], 1.0])
+        .collect();
+    let buf = image::Rgba32FImage::from_raw(img.width, img.height, data)
+        .ok_or_else(|| RenderError::Image("image size mismatch".into()))?;
+    write_atomically(path, |tmp| {
+        buf.save_with_format(tmp, image::ImageFormat::OpenExr)
+            .map_err(|e| RenderError::Image(e.to_string()))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn half_floats_decode() {
+        assert_eq!(f16_to_f32(0x3c00), 1.0);
+        assert_eq!(f16_to_f32(0xc000), -2.0);
+        assert_eq!(f16_to_f32(0x7bff), 65504.0);
+        assert_eq!(f16_to_f32(0x0001), 2f32.powi(-24));
+        assert!(f16_to_f32(0x7e00).is_nan());
+        assert_eq!(f16_to_f32(0x7c00), f32::INFINITY);
+    }
+}

@@ -1,0 +1,59 @@
+// G-buffer pass of a deferred renderer (Saito & Takahashi 1990; Deering et al. 1988): one
+// geometry pass writes albedo, an octahedral normal, material, the baked light-map irradiance
+// (sampled on the second UV set) and emission; depth goes to Depth32Float and positions are
+// reconstructed from it later. Geometry is two-sided: back faces flip their normal.
+
+@group(0) @binding(0) var<uniform> camera: Camera;
+@group(0) @binding(1) var lightmap: texture_2d<f32>;
+@group(0) @binding(2) var lightmap_sampler: sampler;
+
+struct VertexIn {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec3<f32>,
+    @location(2) albedo: vec3<f32>,
+    @location(3) emissive: vec3<f32>,
+    @location(4) lightmap_uv: vec2<f32>,
+};
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) normal: vec3<f32>,
+    @location(1) albedo: vec3<f32>,
+    @location(2) emissive: vec3<f32>,
+    @location(3) lightmap_uv: vec2<f32>,
+};
+
+@vertex
+fn gbuffer_vs(v: VertexIn) -> VertexOut {
+    var out: VertexOut;
+    out.clip = camera.view_proj * vec4<f32>(v.position, 1.0);
+    out.normal = v.normal;
+    out.albedo = v.albedo;
+    out.emissive = v.emissive;
+    out.lightmap_uv = v.lightmap_uv;
+    return out;
+}
+
+struct GBufferOut {
+    @location(0) albedo: vec4<f32>,
+    @location(1) normal: vec2<f32>,
+    @location(2) material: vec2<f32>,
+    @location(3) irradiance: vec4<f32>,
+    @location(4) emissive: vec4<f32>,
+};
+
+@fragment
+fn gbuffer_fs(in: VertexOut, @builtin(front_facing) front: bool) -> GBufferOut {
+    var n = normalize(in.normal);
+    if (!front) {
+        n = -n;
+    }
+    var out: GBufferOut;
+    out.albedo = vec4<f32>(in.albedo, 1.0);
+    out.normal = oct_encode(n);
+    // r: roughness (Lambertian: 1), g: 1 where a light map covers the surface.
+    out.material = vec2<f32>(1.0, 1.0);
+    out.irradiance = vec4<f32>(textureSampleLevel(lightmap, lightmap_sampler, in.lightmap_uv, 0.0).rgb, 1.0);
+    out.emissive = vec4<f32>(in.emissive, 1.0);
+    return out;
+}

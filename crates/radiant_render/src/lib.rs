@@ -1,0 +1,121 @@
+//! Radiant's renderer on wgpu: the GPU context, the render graph, the G-buffer, tiled deferred
+//! lighting, SSAO and offscreen capture. Post-processing (bloom, tone mapping, Sobel, blur) and
+//! the assembled frame live in `radiant_post`.
+//!
+//! The renderer consumes light maps; it never runs the radiosity solver.
+//!
+//! ```no_run
+//! use radiant_render::{GpuContext, graph::{RenderGraph, TexturePool}};
+//! let gpu = GpuContext::headless()?; // honours WGPU_BACKEND and WGPU_ADAPTER_NAME
+//! println!("{}", gpu.info.name);
+//! # Ok::<(), radiant_render::RenderError>(())
+//! ```
+
+pub mod capture;
+pub mod context;
+pub mod gbuffer;
+pub mod graph;
+pub mod lighting;
+pub mod scene;
+pub mod ssao;
+pub mod util;
+
+pub use context::{GpuContext, Requirements};
+pub use wgpu;
+
+/// The WGSL prelude every shader of the renderer starts with: the camera block, the fullscreen
+/// triangle, octahedral normals and depth reconstruction.
+pub const COMMON_WGSL: &str = include_str!("common.wgsl");
+
+/// Every shader of this crate, as (name, full source), for validation.
+pub fn shaders() -> Vec<(&'static str, String)> {
+    vec![
+        ("gbuffer", gbuffer::shader_source()),
+        ("lighting", lighting::shader_source()),
+        ("ssao", ssao::shader_source()),
+        ("ssao_blur", ssao::blur_shader_source()),
+    ]
+}
+
+/// Why rendering failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    /// No adapter at all.
+    #[error("{}", context::SOFTWARE_ADAPTER_HINT)]
+    NoAdapter,
+    /// `WGPU_ADAPTER_NAME` matched none of the adapters.
+    #[error("WGPU_ADAPTER_NAME={name:?} matches no adapter; available: {available:?}")]
+    AdapterNotFound {
+        /// The requested name.
+        name: String,
+        /// The adapters there are.
+        available: Vec<String>,
+    },
+    /// The adapter refused to create a device.
+    #[error("could not create a GPU device: {0}")]
+    RequestDevice(String),
+    /// A pass needs something the adapter lacks (essential passes only; optional ones are
+    /// skipped with a warning).
+    #[error("pass `{pass}` cannot run on this adapter: {reason}")]
+    Unsupported {
+        /// The pass.
+        pass: &'static str,
+        /// What is missing.
+        reason: String,
+    },
+    /// A wgpu validation or out-of-memory error.
+    #[error("GPU error: {0}")]
+    Gpu(String),
+    /// A render graph that does not compile or run.
+    #[error("render graph: {0}")]
+    Graph(String),
+    /// Reading a texture back failed.
+    #[error("readback failed: {0}")]
+    Readback(String),
+    /// The target size is zero or above the adapter's limit.
+    #[error("size {width}×{height} is outside 1..={max} per side")]
+    InvalidSize {
+        /// Width asked for.
+        width: u32,
+        /// Height asked for.
+        height: u32,
+        /// The adapter's largest 2D texture.
+        max: u32,
+    },
+    /// A setting outside its documented range.
+    #[error("{field} = {value} is outside its range {range}")]
+    InvalidSetting {
+        /// The field, as `effect.field`.
+        field: &'static str,
+        /// The value given.
+        value: f64,
+        /// The valid range.
+        range: &'static str,
+    },
+    /// The scene has no triangles.
+    #[error("the scene has no triangles to draw")]
+    EmptyScene,
+    /// An index past the vertex buffer.
+    #[error("index {index} is past the {vertices} vertices")]
+    IndexOutOfRange {
+        /// The index.
+        index: u32,
+        /// Vertex count.
+        vertices: usize,
+    },
+    /// NaN or infinity in scene data.
+    #[error("non-finite values in the {0}")]
+    NonFinite(&'static str),
+    /// Encoding an image failed.
+    #[error("image encoding: {0}")]
+    Image(String),
+    /// A file could not be written.
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+}
+
+impl From<graph::GraphError> for RenderError {
+    fn from(e: graph::GraphError) -> Self {
+        RenderError::Graph(e.to_string())
+    }
+}

@@ -1,0 +1,624 @@
+//! What the renderer draws: vertices with material colours and light-map coordinates, punctual
+//! lights, a camera and a light map, and their GPU copies.
+//!
+//! Positions are stored relative to [`RenderScene::origin`] (f64), so a scene far from the world
+//! origin keeps full f32 precision near the camera.
+
+use glam::{DVec3, Mat4, Vec3};
+use wgpu::util::DeviceExt;
+
+use crate::RenderError;
+
+/// One vertex of the static geometry.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Vertex {
+    /// Position relative to the scene origin, metres.
+    pub position: [f32; 3],
+    /// Unit normal.
+    pub normal: [f32; 3],
+    /// Linear diffuse reflectance (albedo).
+    pub albedo: [f32; 3],
+    /// Emitted radiance, linear, in the bake's units.
+    pub emissive: [f32; 3],
+    /// Light-map coordinates (the second UV set), in [0, 1].
+    pub lightmap_uv: [f32; 2],
+}
+
+/// The kind of a punctual light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LightKind {
+    /// Shines along `direction` everywhere; `intensity` in lux.
+    Directional,
+    /// Omnidirectional from `position`; `intensity` in candela.
+    Point,
+    /// A cone from `position` along `direction`; `intensity` in candela.
+    Spot {
+        /// Cosine-space start of the falloff: angle from the axis in radians.
+        inner_angle: f32,
+        /// Angle from the axis where the light ends, radians.
+        outer_angle: f32,
+    },
+}
+
+/// A punctual light (KHR_lights_punctual conventions).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Light {
+    /// Point, spot or directional.
+    pub kind: LightKind,
+    /// World position (point, spot), absolute.
+    pub position: DVec3,
+    /// Unit direction the light travels (spot, directional).
+    pub direction: Vec3,
+    /// Linear colour.
+    pub color: Vec3,
+    /// Candela (point, spot) or lux (directional).
+    pub intensity: f32,
+    /// Distance where the light reaches zero, metres; `f32::INFINITY` for none.
+    pub range: f32,
+}
+
+/// A pinhole camera.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraView {
+    /// World position, absolute.
+    pub position: DVec3,
+    /// Unit view direction.
+    pub forward: Vec3,
+    /// Up vector.
+    pub up: Vec3,
+    /// Vertical field of view, radians.
+    pub yfov: f32,
+    /// Near plane, metres.
+    pub near: f32,
+    /// Far plane, metres.
+    pub far: f32,
+}
+
+impl CameraView {
+    /// View matrix for a camera at `position - origin`.
+    pub fn view(&self, origin: DVec3) -> Mat4 {
+        let eye = (self.position - origin).as_vec3();
+        let dir = self.forward.normalize_or(Vec3::NEG_Z);
+        // An up vector parallel to the view direction would make the basis singular.
+        let up = if dir.cross(self.up).length_squared() > 1e-8 {
+            self.up.normalize()
+        } else {
+            dir.any_orthonormal_vector()
+        };
+        glam::camera::rh::view::look_to_mat4(eye, dir, up)
+    }
+
+    /// Projection matrix (depth 0 at the near plane, 1 at the far plane).
+    pub fn projection(&self, aspect: f32) -> Mat4 {
+        // wgpu's clip space: y up, depth in [0, 1] (the Direct3D convention).
+        glam::camera::rh::proj::directx::perspective(
+            self.yfov.clamp(1e-3, 3.1),
+            aspect.max(1e-6),
+            self.near,
+            self.far.max(self.near * 2.0),
+        )
+    }
+}
+
+/// A light map: incident radiance-weighted irradiance per texel (`H`, the bake's units: a
+/// surface of albedo `a` reflects radiance `a · H`), linear RGB.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LightMap {
+    /// Width in texels.
+    pub width: u32,
+    /// Height in texels.
+    pub height: u32,
+    /// Row-major texels, RGB.
+    pub texels: Vec<[f32; 3]>,
+}
+
+/// A light-map texel's place on the geometry, for [`RenderScene::fill_lightmap`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LightmapTexel {
+    /// Index of the triangle (the scene's triangle order).
+    pub triangle: usize,
+    /// Barycentric weight of the triangle's second vertex.
+    pub u: f32,
+    /// Barycentric weight of the third vertex.
+    pub v: f32,
+    /// World position.
+    pub position: DVec3,
+    /// The triangle's unit normal.
+    pub normal: Vec3,
+}
+
+/// Everything the renderer draws.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderScene {
+    /// World position that vertex positions are relative to.
+    pub origin: DVec3,
+    /// Triangle-list vertices.
+    pub vertices: Vec<Vertex>,
+    /// Triangle indices into `vertices`.
+    pub indices: Vec<u32>,
+    /// Punctual lights.
+    pub lights: Vec<Light>,
+    /// The camera.
+    pub camera: CameraView,
+    /// The baked light map, if any (without one the indirect term is zero).
+    pub lightmap: Option<LightMap>,
+}
+
+impl RenderScene {
+    /// Converts a radiosity scene: flat-shaded triangles with one light-map chart each, the
+    /// scene's lights and camera, and no light map yet.
+    ///
+    /// Each triangle gets a `cell × cell` texel square in a grid atlas; its vertices map to three
+    /// corners, inset by one texel so bilinear filtering stays inside the chart.
+    pub fn from_scene(scene: &radiant_scene::Scene, cell: u32) -> Result<Self, RenderError> {
+        if scene.triangles.is_empty() {
+            return Err(RenderError::EmptyScene);
+        }
+        let cell = cell.clamp(4, 256);
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for t in &scene.triangles {
+            for v in t.vertices {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+        }
+        let origin = (lo + hi) * 0.5;
+        let n = scene.triangles.len() as u32;
+        let cols = (f64::from(n).sqrt().ceil() as u32).max(1);
+        let rows = n.div_ceil(cols);
+        let (w, h) = (cols * cell, rows * cell);
+        let mut vertices = Vec::with_capacity(scene.triangles.len() * 3);
+        for (i, t) in scene.triangles.iter().enumerate() {
+            let s = &scene.surfaces[t.surface as usize];
+            let normal = t.cross().normalize_or_zero().as_vec3().to_array();
+            let (cx, cy) = ((i as u32 % cols) * cell, (i as u32 / cols) * cell);
+            let inset = 1.0;
+            let span = cell as f32 - 2.0 * inset - 1.0;
+            let corner = |u: f32, v: f32| {
+                [
+                    (cx as f32 + inset + 0.5 + u * span) / w as f32,
+                    (cy as f32 + inset + 0.5 + v * span) / h as f32,
+                ]
+            };
+            let uvs = [corner(0.0, 0.0), corner(1.0, 0.0), corner(0.0, 1.0)];
+            for (k, p) in t.vertices.iter().enumerate() {
+                vertices.push(Vertex {
+                    position: (*p - origin).as_vec3().to_array(),
+                    normal,
+                    albedo: s.reflectance.map(|x| x as f32),
+                    emissive: s.emission.map(|x| x as f32),
+                    lightmap_uv: uvs[k],
+                });
+            }
+        }
+        let camera = scene.camera.map_or(
+            CameraView {
+                position: origin + DVec3::new(0.0, 0.0, (hi - lo).length() * 1.5),
+                forward: Vec3::NEG_Z,
+                up: Vec3::Y,
+                yfov: 0.7,
+                near: 0.01,
+                far: 100.0,
+            },
+            |c| CameraView {
+                position: c.position,
+                forward: c.forward.as_vec3(),
+                up: c.up.as_vec3(),
+                yfov: c.yfov as f32,
+                near: 0.01,
+                far: ((hi - lo).length() * 4.0).max(1.0) as f32,
+            },
+        );
+        let lights = scene
+            .lights
+            .iter()
+            .map(|l| Light {
+                kind: match l.kind {
+                    radiant_scene::LightKind::Point => LightKind::Point,
+                    radiant_scene::LightKind::Directional => LightKind::Directional,
+                    radiant_scene::LightKind::Spot {
+                        inner_cone_angle,
+                        outer_cone_angle,
+                    } => LightKind::Spot {
+                        inner_angle: inner_cone_angle as f32,
+                        outer_angle: outer_cone_angle as f32,
+                    },
+                },
+                position: l.position,
+                direction: l.direction.as_vec3(),
+                color: Vec3::from_array(l.color.map(|c| c as f32)),
+                intensity: l.intensity as f32,
+                range: l.range.map_or(f32::INFINITY, |r| r as f32),
+            })
+            .collect();
+        Ok(Self {
+            origin,
+            indices: (0..vertices.len() as u32).collect(),
+            vertices,
+            lights,
+            camera,
+            lightmap: Some(LightMap {
+                width: w,
+                height: h,
+                texels: vec![[0.0; 3]; (w * h) as usize],
+            }),
+        })
+    }
+
+    /// Fills the light map by evaluating `h` at every chart texel (texels around a chart's edge
+    /// get the value of the nearest point on the triangle, so bilinear filtering never reads
+    /// outside it). Needs the layout of [`RenderScene::from_scene`].
+    pub fn fill_lightmap(&mut self, h: impl Fn(&LightmapTexel) -> [f32; 3]) {
+        let Some(lm) = self.lightmap.as_mut() else {
+            return;
+        };
+        let (w, hgt) = (lm.width as f32, lm.height as f32);
+        for (index, tri) in self.vertices.chunks_exact(3).enumerate() {
+            let uv = [&tri[0], &tri[1], &tri[2]]
+                .map(|v| glam::Vec2::from(v.lightmap_uv) * glam::Vec2::new(w, hgt));
+            let lo = uv[0].min(uv[1]).min(uv[2]).floor() - 1.0;
+            let hi = uv[0].max(uv[1]).max(uv[2]).ceil() + 1.0;
+            let (e1, e2) = (uv[1] - uv[0], uv[2] - uv[0]);
+            let det = e1.perp_dot(e2);
+            if det.abs() < 1e-12 {
+                continue;
+            }
+            for y in lo.y.max(0.0) as u32..(hi.y as u32).min(lm.height) {
+                for x in lo.x.max(0.0) as u32..(hi.x as u32).min(lm.width) {
+                    let p = glam::Vec2::new(x as f32 + 0.5, y as f32 + 0.5) - uv[0];
+                    // Barycentrics, clamped onto the triangle so the border texels dilate it.
+                    let u = (p.perp_dot(e2) / det).clamp(0.0, 1.0);
+                    let v = (e1.perp_dot(p) / det).clamp(0.0, 1.0 - u);
+                    let pos = Vec3::from(tri[0].position)
+                        + (Vec3::from(tri[1].position) - Vec3::from(tri[0].position)) * u
+                        + (Vec3::from(tri[2].position) - Vec3::from(tri[0].position)) * v;
+                    let texel = LightmapTexel {
+                        triangle: index,
+                        u,
+                        v,
+                        position: self.origin + pos.as_dvec3(),
+                        normal: Vec3::from(tri[0].normal),
+                    };
+                    lm.texels[(y * lm.width + x) as usize] = h(&texel);
+                }
+            }
+        }
+    }
+
+    /// A smooth synthetic light map: the unoccluded irradiance from every emissive triangle,
+    /// treated as a small area source at its centroid, plus a constant `ambient`. It has no
+    /// shadows; it stands in for a bake in renderer tests.
+    pub fn fill_synthetic_lightmap(&mut self, ambient: f32) {
+        let emitters: Vec<(Vec3, Vec3, f32, Vec3)> = self
+            .vertices
+            .chunks_exact(3)
+            .filter(|t| t[0].emissive.iter().any(|&e| e > 0.0))
+            .map(|t| {
+                let p = [0, 1, 2].map(|k| Vec3::from(t[k].position));
+                let c = (p[0] + p[1] + p[2]) / 3.0;
+                let cross = (p[1] - p[0]).cross(p[2] - p[0]);
+                (
+                    c,
+                    Vec3::from(t[0].normal),
+                    0.5 * cross.length(),
+                    Vec3::from(t[0].emissive),
+                )
+            })
+            .collect();
+        let origin = self.origin;
+        self.fill_lightmap(|t| {
+            let (p, n) = ((t.position - origin).as_vec3(), t.normal);
+            let mut h = Vec3::splat(ambient);
+            for &(c, ne, area, e) in &emitters {
+                let d = c - p;
+                let r2 = d.length_squared().max(1e-4);
+                let dir = d / r2.sqrt();
+                let cos_r = n.dot(dir).max(0.0);
+                let cos_e = (-ne.dot(dir)).abs();
+                h += e * (cos_r * cos_e * area / (std::f32::consts::PI * r2)).min(1.0);
+            }
+            h.to_array()
+        });
+    }
+}
+
+/// Per-frame camera data as the shaders see it.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct CameraUniform {
+    /// World (origin-relative) → clip.
+    pub view_proj: [[f32; 4]; 4],
+    /// Clip → world.
+    pub inv_view_proj: [[f32; 4]; 4],
+    /// World → view.
+    pub view: [[f32; 4]; 4],
+    /// View → clip.
+    pub proj: [[f32; 4]; 4],
+    /// Clip → view.
+    pub inv_proj: [[f32; 4]; 4],
+    /// Camera position (origin-relative), w = 1.
+    pub position: [f32; 4],
+    /// Width, height, 1/width, 1/height.
+    pub viewport: [f32; 4],
+    /// Near, far, light count, unused.
+    pub params: [f32; 4],
+}
+
+/// A light as the shaders see it (64 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct GpuLight {
+    /// Origin-relative position, and range (0 for none).
+    pub position_range: [f32; 4],
+    /// Direction of travel, and kind (0 directional, 1 point, 2 spot).
+    pub direction_kind: [f32; 4],
+    /// Colour × intensity, and unused.
+    pub color: [f32; 4],
+    /// Spot cosines: outer, 1 / (inner − outer), unused × 2.
+    pub spot: [f32; 4],
+}
+
+/// The scene's GPU buffers and textures.
+pub struct GpuScene {
+    /// Vertex buffer.
+    pub vertices: wgpu::Buffer,
+    /// Index buffer (u32).
+    pub indices: wgpu::Buffer,
+    /// Number of indices.
+    pub index_count: u32,
+    /// Storage buffer of [`GpuLight`] (at least one zeroed entry).
+    pub lights: wgpu::Buffer,
+    /// Number of real lights.
+    pub light_count: u32,
+    /// The light map, Rgba16Float (1×1 black without one).
+    pub lightmap: wgpu::TextureView,
+    /// Bilinear, clamped sampler.
+    pub linear_sampler: wgpu::Sampler,
+    /// [`CameraUniform`] buffer, written each frame.
+    pub camera: wgpu::Buffer,
+    /// The CPU scene's origin and camera.
+    pub origin: DVec3,
+    /// The camera used by [`GpuScene::update_camera`].
+    pub camera_view: CameraView,
+}
+
+/// Converts an f32 to IEEE binary16 bits (round to nearest, saturating to ±65504).
+fn f32_to_f16(x: f32) -> u16 {
+    if x.is_nan() {
+        return 0;
+    }
+    let x = x.clamp(-65504.0, 65504.0);
+    let bits = x.to_bits();
+    let sign = ((bits >> 16) & 0x8000) as u16;
+    let a = x.abs();
+    if a < 6.103_515_6e-5 {
+        // Subnormal half.
+        return sign | (a / 5.960_464_5e-8).round() as u16;
+    }
+    let e = ((bits >> 23) & 0xff) as i32 - 127 + 15;
+    let m = bits & 0x7f_ffff;
+    let mut h = ((e as u32) << 10) | (m >> 13);
+    // Round half up on the dropped bits.
+    if m & 0x1000 != 0 {
+        h += 1;
+    }
+    sign | (h.min(0x7bff) as u16)
+}
+
+impl GpuScene {
+    /// Uploads a scene. Refuses non-finite vertex data and lights (typed error, no NaN on the GPU).
+    pub fn upload(gpu: &crate::GpuContext, scene: &RenderScene) -> Result<Self, RenderError> {
+        let dev = &gpu.device;
+        if scene.vertices.is_empty() || scene.indices.is_empty() {
+            return Err(RenderError::EmptyScene);
+        }
+        for v in &scene.vertices {
+            let all = v
+                .position
+                .iter()
+                .chain(&v.normal)
+                .chain(&v.albedo)
+                .chain(&v.emissive)
+                .chain(&v.lightmap_uv);
+            if all.clone().any(|x| !x.is_finite()) {
+                return Err(RenderError::NonFinite("vertex data"));
+            }
+        }
+        if let Some(&i) = scene
+            .indices
+            .iter()
+            .find(|&&i| i as usize >= scene.vertices.len())
+        {
+            return Err(RenderError::IndexOutOfRange {
+                index: i,
+                vertices: scene.vertices.len(),
+            });
+        }
+        let vertices = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("scene_vertices"),
+            contents: bytemuck::cast_slice(&scene.vertices),
+            usage: wgpu::BufferUsages::VERTEX,
+        });
+        let indices = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("scene_indices"),
+            contents: bytemuck::cast_slice(&scene.indices),
+            usage: wgpu::BufferUsages::INDEX,
+        });
+        let mut lights: Vec<GpuLight> = Vec::with_capacity(scene.lights.len().max(1));
+        for l in &scene.lights {
+            let p = (l.position - scene.origin).as_vec3();
+            let c = l.color * l.intensity;
+            if !(p.is_finite() && c.is_finite() && l.direction.is_finite()) || l.intensity < 0.0 {
+                return Err(RenderError::NonFinite("light"));
+            }
+            let (kind, spot) = match l.kind {
+                LightKind::Directional => (0.0, [0.0; 4]),
+                LightKind::Point => (1.0, [0.0; 4]),
+                LightKind::Spot {
+                    inner_angle,
+                    outer_angle,
+                } => {
+                    let (ci, co) = (inner_angle.cos(), outer_angle.cos());
+                    (2.0, [co, 1.0 / (ci - co).max(1e-4), 0.0, 0.0])
+                }
+            };
+            lights.push(GpuLight {
+                position_range: [
+                    p.x,
+                    p.y,
+                    p.z,
+                    if l.range.is_finite() { l.range } else { 0.0 },
+                ],
+                direction_kind: {
+                    let d = l.direction.normalize_or(Vec3::NEG_Y);
+                    [d.x, d.y, d.z, kind]
+                },
+                color: [c.x, c.y, c.z, 0.0],
+                spot,
+            });
+        }
+        let light_count = lights.len() as u32;
+        if lights.is_empty() {
+            lights.push(GpuLight::zeroed());
+        }
+        let lights = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("scene_lights"),
+            contents: bytemuck::cast_slice(&lights),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        let (lw, lh, data): (u32, u32, Vec<u16>) = match &scene.lightmap {
+            Some(lm) if lm.texels.len() == (lm.width * lm.height) as usize && lm.width > 0 => {
+                if lm.texels.iter().flatten().any(|x| !x.is_finite()) {
+                    return Err(RenderError::NonFinite("light map"));
+                }
+                let max = gpu.device.limits().max_texture_dimension_2d;
+                if lm.width > max || lm.height > max {
+                    return Err(RenderError::InvalidSize {
+                        width: lm.width,
+                        height: lm.height,
+                        max,
+                    });
+                }
+                (
+                    lm.width,
+                    lm.height,
+                    lm.texels
+                        .iter()
+                        .flat_map(|t| [t[0], t[1], t[2], 1.0].map(f32_to_f16))
+                        .collect(),
+                )
+            }
+            Some(_) => return Err(RenderError::NonFinite("light map size")),
+            None => (1, 1, vec![0; 4]),
+        };
+        let tex = dev.create_texture_with_data(
+            &gpu.queue,
+            &wgpu::TextureDescriptor {
+                label: Some("scene_lightmap"),
+                size: wgpu::Extent3d {
+                    width: lw,
+                    height: lh,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba16Float,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            bytemuck::cast_slice(&data),
+        );
+        let linear_sampler = dev.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("linear_clamp"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
+        let camera = dev.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("camera_uniform"),
+            size: std::mem::size_of::<CameraUniform>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Ok(Self {
+            vertices,
+            indices,
+            index_count: scene.indices.len() as u32,
+            lights,
+            light_count,
+            lightmap: tex.create_view(&wgpu::TextureViewDescriptor::default()),
+            linear_sampler,
+            camera,
+            origin: scene.origin,
+            camera_view: scene.camera,
+        })
+    }
+
+    /// Writes the camera uniform for a `width × height` target.
+    pub fn update_camera(&self, queue: &wgpu::Queue, width: u32, height: u32) {
+        let (w, h) = (width.max(1) as f32, height.max(1) as f32);
+        let view = self.camera_view.view(self.origin);
+        let proj = self.camera_view.projection(w / h);
+        let vp = proj * view;
+        let eye = (self.camera_view.position - self.origin).as_vec3();
+        let u = CameraUniform {
+            view_proj: vp.to_cols_array_2d(),
+            inv_view_proj: vp.inverse().to_cols_array_2d(),
+            view: view.to_cols_array_2d(),
+            proj: proj.to_cols_array_2d(),
+            inv_proj: proj.inverse().to_cols_array_2d(),
+            position: [eye.x, eye.y, eye.z, 1.0],
+            viewport: [w, h, 1.0 / w, 1.0 / h],
+            params: [
+                self.camera_view.near,
+                self.camera_view.far,
+                self.light_count as f32,
+                0.0,
+            ],
+        };
+        queue.write_buffer(&self.camera, 0, bytemuck::bytes_of(&u));
+    }
+}
+
+use bytemuck::Zeroable as _;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn f16_round_trip() {
+        for x in [0.0f32, 1.0, -2.5, 0.1, 1e-6, 65504.0, 1e9, 3.3e-5] {
+            let back = crate::capture::f16_to_f32(f32_to_f16(x));
+            let want = x.clamp(-65504.0, 65504.0);
+            assert!(
+                (back - want).abs() <= want.abs() * 1e-3 + 6e-8,
+                "{x} -> {back}"
+            );
+        }
+    }
+
+    #[test]
+    fn cornell_conversion_keeps_every_triangle_and_a_valid_atlas() {
+        let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+        let mut rs = RenderScene::from_scene(&scene, 16).expect("convert");
+        assert_eq!(rs.vertices.len(), scene.triangles.len() * 3);
+        assert!(
+            rs.vertices
+                .iter()
+                .all(|v| v.lightmap_uv.iter().all(|&c| (0.0..=1.0).contains(&c)))
+        );
+        rs.fill_synthetic_lightmap(0.05);
+        let lm = rs.lightmap.as_ref().expect("light map");
+        assert!(
+            lm.texels
+                .iter()
+                .flatten()
+                .all(|x| x.is_finite() && *x >= 0.0)
+        );
+        assert!(lm.texels.iter().any(|t| t[0] > 0.1));
+    }
+}
