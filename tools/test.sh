@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # Radiant's whole test suite, as CI runs it: formatting, lints, every test.
 #
-# Everything here runs on the CPU. Needs: the Rust toolchain pinned in rust-toolchain.toml
-# (1.95.0, with rustfmt and clippy) and a C compiler for build scripts. Builds once, in the dev
-# profile (dependencies optimised, see Cargo.toml), and reuses that build for all tests.
+# Needs: the Rust toolchain pinned in rust-toolchain.toml (1.95.0, with rustfmt and clippy), a C
+# compiler for build scripts, and a Vulkan driver for the GPU tests: with no GPU, Mesa's
+# software rasteriser lavapipe (Debian: mesa-vulkan-drivers). As root with apt, this script
+# installs what is missing; otherwise it says what to install. Builds once, in the dev profile
+# (dependencies optimised, see Cargo.toml), and reuses that build for all tests.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -21,6 +23,32 @@ if ! command -v cc >/dev/null 2>&1; then
     echo "no C compiler: run 'sudo apt-get install build-essential', then this again." >&2
     exit 1
   fi
+fi
+
+have_vulkan() {
+  { ls /usr/share/vulkan/icd.d/*.json /etc/vulkan/icd.d/*.json >/dev/null 2>&1; } &&
+    { ldconfig -p 2>/dev/null | grep -q 'libvulkan\.so\.1'; }
+}
+if ! have_vulkan; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    say "installing Mesa's software Vulkan driver (lavapipe) for the GPU tests"
+    apt-get update -qq && apt-get install -y -qq --no-install-recommends mesa-vulkan-drivers libvulkan1
+  else
+    echo "the GPU tests need a Vulkan driver. With no GPU, install Mesa's lavapipe:" >&2
+    echo "  sudo apt-get install mesa-vulkan-drivers libvulkan1" >&2
+    exit 1
+  fi
+fi
+# Vulkan, not the GL fallback; Mesa wants a private runtime directory.
+export WGPU_BACKEND="${WGPU_BACKEND:-vulkan}"
+if [ -z "${XDG_RUNTIME_DIR:-}" ] || [ ! -d "$XDG_RUNTIME_DIR" ]; then
+  XDG_RUNTIME_DIR="$(mktemp -d)"
+  chmod 700 "$XDG_RUNTIME_DIR"
+  export XDG_RUNTIME_DIR
+fi
+# Debian 12's validation layers predate the SPIR-V wgpu 30 writes and report false errors.
+if dpkg -s vulkan-validationlayers >/dev/null 2>&1; then
+  export WGPU_VALIDATION="${WGPU_VALIDATION:-0}"
 fi
 
 say "cargo fmt --check"

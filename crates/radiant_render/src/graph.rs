@@ -696,3 +696,148 @@ impl CompiledGraph {
         Ok(PassTimings { passes, gpu: false })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const F: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+
+    fn desc() -> TextureDesc {
+        TextureDesc::new(64, 32, F)
+    }
+
+    #[test]
+    fn culls_passes_that_do_not_reach_the_target_and_allocates_nothing_for_them() {
+        let mut g = RenderGraph::new();
+        let target = g.import("target", desc());
+        let a = g.create("a", desc());
+        let unused = g.create("unused", TextureDesc::new(512, 512, F));
+        let unused2 = g.create("unused2", desc());
+        g.add_pass("draw", &[], &[a], |_| {});
+        g.add_pass("side", &[a], &[unused], |_| {});
+        g.add_pass("side2", &[unused], &[unused2], |_| {});
+        g.add_pass("present", &[a], &[target], |_| {});
+        let plan = g.compile().expect("compiles");
+        let r = plan.report();
+        assert_eq!(r.passes, vec!["draw", "present"]);
+        assert_eq!(r.culled, vec!["side", "side2"]);
+        assert_eq!(r.virtual_textures, 1);
+        assert_eq!(r.bytes, desc().bytes());
+        assert_eq!(plan.slot(unused), None);
+    }
+
+    #[test]
+    fn orders_by_dependency_not_declaration() {
+        let mut g = RenderGraph::new();
+        let target = g.import("target", desc());
+        let a = g.create("a", desc());
+        let b = g.create("b", desc());
+        g.add_pass("present", &[b], &[target], |_| {});
+        g.add_pass("second", &[a], &[b], |_| {});
+        g.add_pass("first", &[], &[a], |_| {});
+        let r = g.compile().expect("compiles").report();
+        assert_eq!(r.passes, vec!["first", "second", "present"]);
+    }
+
+    #[test]
+    fn aliases_textures_whose_lifetimes_do_not_overlap() {
+        // a -> b -> c -> d -> target: a and c (and b and d) can share memory.
+        let mut g = RenderGraph::new();
+        let target = g.import("target", desc());
+        let t: Vec<TextureHandle> = ["a", "b", "c", "d"]
+            .iter()
+            .map(|n| g.create(n, desc()))
+            .collect();
+        g.add_pass("p0", &[], &[t[0]], |_| {});
+        g.add_pass("p1", &[t[0]], &[t[1]], |_| {});
+        g.add_pass("p2", &[t[1]], &[t[2]], |_| {});
+        g.add_pass("p3", &[t[2]], &[t[3]], |_| {});
+        g.add_pass("p4", &[t[3]], &[target], |_| {});
+        let plan = g.compile().expect("compiles");
+        let r = plan.report();
+        assert_eq!(r.virtual_textures, 4);
+        assert_eq!(r.physical_textures.len(), 2);
+        assert_eq!(r.bytes, 2 * desc().bytes());
+        assert_eq!(plan.slot(t[0]), plan.slot(t[2]));
+        assert_eq!(plan.slot(t[1]), plan.slot(t[3]));
+        assert_ne!(plan.slot(t[0]), plan.slot(t[1]));
+    }
+
+    #[test]
+    fn different_descriptions_never_alias_and_exports_live_to_the_end() {
+        let mut g = RenderGraph::new();
+        let target = g.import("target", desc());
+        let hdr = g.create("hdr", desc());
+        let small = g.create("small", TextureDesc::new(32, 16, F));
+        let late = g.create("late", desc());
+        g.add_pass("p0", &[], &[hdr], |_| {});
+        g.add_pass("p1", &[hdr], &[small], |_| {});
+        g.add_pass("p2", &[small], &[late], |_| {});
+        g.add_pass("p3", &[late], &[target], |_| {});
+        g.export(hdr);
+        let plan = g.compile().expect("compiles");
+        // Without the export, `late` could reuse `hdr`'s memory.
+        assert_ne!(plan.slot(hdr), plan.slot(late));
+        assert_ne!(plan.slot(hdr), plan.slot(small));
+        assert_eq!(plan.report().physical_textures.len(), 3);
+    }
+
+    #[test]
+    fn export_alone_is_an_output() {
+        let mut g = RenderGraph::new();
+        let a = g.create("a", desc());
+        g.add_pass("p", &[], &[a], |_| {});
+        g.export(a);
+        assert_eq!(g.compile().expect("compiles").report().passes, vec!["p"]);
+    }
+
+    #[test]
+    fn malformed_graphs_are_typed_errors() {
+        let mut g = RenderGraph::new();
+        let t = g.import("t", desc());
+        let a = g.create("a", desc());
+        g.add_pass("w1", &[], &[a], |_| {});
+        g.add_pass("w2", &[], &[a], |_| {});
+        g.add_pass("p", &[a], &[t], |_| {});
+        assert!(matches!(
+            g.compile(),
+            Err(GraphError::WrittenTwice { texture: "a", .. })
+        ));
+
+        let mut g = RenderGraph::new();
+        let t = g.import("t", desc());
+        let a = g.create("a", desc());
+        g.add_pass("p", &[a], &[t], |_| {});
+        assert!(matches!(
+            g.compile(),
+            Err(GraphError::ReadOfUnwritten { pass: "p", .. })
+        ));
+
+        let mut g = RenderGraph::new();
+        let a = g.create("a", desc());
+        g.add_pass("p", &[], &[a], |_| {});
+        assert!(matches!(g.compile(), Err(GraphError::NoOutput)));
+
+        let mut g = RenderGraph::new();
+        let t = g.import("t", desc());
+        let a = g.create("a", desc());
+        let b = g.create("b", desc());
+        g.add_pass("x", &[b], &[a], |_| {});
+        g.add_pass("y", &[a], &[b, t], |_| {});
+        assert!(matches!(g.compile(), Err(GraphError::Cycle { .. })));
+    }
+
+    #[test]
+    fn bytes_follow_the_format() {
+        assert_eq!(TextureDesc::new(4, 4, F).bytes(), 128);
+        assert_eq!(
+            TextureDesc::new(4, 4, wgpu::TextureFormat::Depth32Float).bytes(),
+            64
+        );
+        assert_eq!(
+            TextureDesc::new(4, 4, wgpu::TextureFormat::R8Unorm).bytes(),
+            16
+        );
+    }
+}
