@@ -94,19 +94,23 @@ fn main() -> anyhow::Result<()> {
         Some(p) => radiant::scene::load_gltf(p)?,
         None => radiant::scene::builtin("cornell-box")?,
     };
-    let mut render_scene = RenderScene::from_scene(&scene, args.lightmap_cell)?;
-    if args.synthetic || !scene.has_emitters() {
-        render_scene.fill_synthetic_lightmap(0.02);
+    let render_scene = if args.synthetic {
+        let mut rs = RenderScene::from_scene(&scene, args.lightmap_cell)?;
+        rs.fill_synthetic_lightmap(0.02);
+        rs
+    } else if !scene.has_emitters() {
+        // Nothing to bake: direct light and emission only.
+        radiant::bridge::render_scene(&scene, None, args.lightmap_cell)?
     } else {
         let t = std::time::Instant::now();
         let bake = Bake::new(&scene, &BakeParams::default())?.run_to_end(&mut |_| {})?;
-        radiant::bridge::fill_lightmap_from_bake(&mut render_scene, &scene, &bake);
         println!(
             "baked {} elements in {:.2} s",
             bake.mesh.element_count(),
             t.elapsed().as_secs_f64()
         );
-    }
+        radiant::bridge::render_scene(&scene, Some(&bake), args.lightmap_cell)?
+    };
 
     let gpu = GpuContext::headless()?;
     println!("adapter: {} ({:?})", gpu.info.name, gpu.info.backend);

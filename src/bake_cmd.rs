@@ -306,7 +306,7 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
 pub fn run_default() -> anyhow::Result<()> {
     let out = PathBuf::from("radiant-out");
     println!(
-        "radiant: no viewer in this build; baking the builtin Cornell box headless into {}/",
+        "radiant: no viewer in this build; baking and rendering the builtin Cornell box headless into {}/",
         out.display()
     );
     let parse = |args: &[&str]| -> anyhow::Result<crate::Cli> {
@@ -337,6 +337,25 @@ pub fn run_default() -> anyhow::Result<()> {
     ])?;
     if let Some(crate::Command::Converge(args)) = cli.command {
         crate::converge_cmd::run(&args)?;
+    }
+    #[cfg(feature = "render")]
+    {
+        let cli = parse(&[
+            "radiant",
+            "render",
+            "--builtin",
+            "cornell-box",
+            "--out",
+            "radiant-out",
+            "--size",
+            "768x768",
+        ])?;
+        if let Some(crate::Command::Render(args)) = cli.command {
+            // The bake and the plots are written; a machine with no GPU adapter still gets them.
+            if let Err(e) = crate::render_cmd::run(&args) {
+                eprintln!("radiant: no frame rendered: {e:#}");
+            }
+        }
     }
     Ok(())
 }

@@ -29,8 +29,23 @@ pub use radiant_scene as scene;
 #[cfg(feature = "render")]
 pub mod bridge {
     use radiant_radiosity::BakeResult;
+    use radiant_render::RenderError;
     use radiant_render::scene::RenderScene;
     use radiant_scene::Scene;
+
+    /// The renderer's scene for `scene`, with `cell × cell` light-map texels per triangle, lit
+    /// by `bake` (or with an empty light map when there is no bake: a scene without emitters).
+    pub fn render_scene(
+        scene: &Scene,
+        bake: Option<&BakeResult>,
+        cell: u32,
+    ) -> Result<RenderScene, RenderError> {
+        let mut rs = RenderScene::from_scene(scene, cell)?;
+        if let Some(bake) = bake {
+            fill_lightmap_from_bake(&mut rs, scene, bake);
+        }
+        Ok(rs)
+    }
 
     /// Fills `render_scene`'s light map (made by `RenderScene::from_scene(scene, ..)`) with the
     /// bake's incident radiance `H = (B − E) / ρ` of the element under each texel, so the

@@ -4,6 +4,8 @@ mod bake_cmd;
 mod converge_cmd;
 mod output;
 mod plot;
+#[cfg(feature = "render")]
+mod render_cmd;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -25,6 +27,10 @@ enum Command {
     Bake(BakeArgs),
     /// Run several method × form-factor combinations and plot their error against run time.
     Converge(ConvergeArgs),
+    /// Bake, then render one frame headless (G-buffer, SSAO, lighting, bloom, tone mapping):
+    /// frame.png (tone-mapped) and frame.exr (linear radiance).
+    #[cfg(feature = "render")]
+    Render(render_cmd::RenderArgs),
 }
 
 /// Which scene to load.
@@ -244,6 +250,8 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Some(Command::Bake(args)) => bake_cmd::run(&args),
         Some(Command::Converge(args)) => converge_cmd::run(&args),
+        #[cfg(feature = "render")]
+        Some(Command::Render(args)) => render_cmd::run(&args),
         None => bake_cmd::run_default(),
     };
     match result {

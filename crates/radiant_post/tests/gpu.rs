@@ -650,3 +650,192 @@ fn golden_cornell_box() {
         );
     }
 }
+
+#[test]
+fn spot_and_directional_lights_match_their_closed_forms() {
+    let gpu = gpu();
+    let (inner, outer) = (0.2f32, 0.5f32);
+    let spot = Light {
+        kind: LightKind::Spot {
+            inner_angle: inner,
+            outer_angle: outer,
+        },
+        position: DVec3::new(0.0, 0.0, 0.8),
+        direction: Vec3::new(0.3, 0.0, -1.0).normalize(),
+        color: Vec3::new(1.0, 0.5, 0.25),
+        intensity: 3.0,
+        range: f32::INFINITY,
+    };
+    let sun = Light {
+        kind: LightKind::Directional,
+        position: DVec3::ZERO,
+        direction: Vec3::new(-0.2, 0.1, -1.0).normalize(),
+        color: Vec3::ONE,
+        intensity: 1.5,
+        range: f32::INFINITY,
+    };
+    let (w, h) = (64u32, 64u32);
+    let settings = FrameSettings {
+        debug_view: DebugView::DirectLight,
+        ..FrameSettings::MINIMAL
+    };
+    for light in [spot, sun] {
+        let s = plane_scene(vec![light]);
+        let mut frame = FrameRenderer::new(&gpu, &s).expect("renderer");
+        let c = frame.capture(&gpu, w, h, &settings).expect("capture");
+        let mut lit = 0;
+        for (x, y) in [(32, 32), (40, 30), (48, 32), (20, 40), (56, 10), (8, 8)] {
+            let p = pixel_on_plane(&s.camera, w, h, x, y, Vec3::Z, 0.0);
+            let e = match light.kind {
+                LightKind::Directional => light.intensity * (-light.direction.z).max(0.0),
+                _ => {
+                    // KHR_lights_punctual spot: smooth (squared) falloff in cosine space.
+                    let d = light.position.as_vec3() - p;
+                    let r = d.length();
+                    let cd = light.direction.dot(-d / r);
+                    let t = ((cd - outer.cos()) / (inner.cos() - outer.cos())).clamp(0.0, 1.0);
+                    light.intensity * (d.z / r).max(0.0) / (r * r) * t * t
+                }
+            };
+            for ch in 0..3 {
+                let want = ALBEDO / std::f32::consts::PI * e * light.color[ch];
+                let got = c.hdr.at(x, y)[ch];
+                assert!(
+                    (got - want).abs() <= want * 3e-3 + 2e-4,
+                    "{:?} pixel ({x}, {y}) channel {ch}: {got} vs {want}",
+                    light.kind
+                );
+            }
+            lit += usize::from(e > 0.01);
+        }
+        assert!(lit >= 2, "{:?}: the test points are all dark", light.kind);
+    }
+}
+
+#[test]
+fn ssao_darkens_the_light_map_term_only() {
+    let gpu = gpu();
+    let mut v = Vec::new();
+    quad(
+        &mut v,
+        Vec3::new(-3.0, -0.5, 3.0),
+        Vec3::new(6.0, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, -4.0),
+        [ALBEDO; 3],
+    );
+    quad(
+        &mut v,
+        Vec3::new(-3.0, -0.5, -1.0),
+        Vec3::new(6.0, 0.0, 0.0),
+        Vec3::new(0.0, 4.0, 0.0),
+        [ALBEDO; 3],
+    );
+    let mut s = scene(v, Vec3::new(0.0, 0.6, 1.5), Vec3::new(0.0, -0.5, -1.0), 1.0);
+    s.lights.push(Light {
+        kind: LightKind::Point,
+        position: DVec3::new(0.0, 0.5, 0.0),
+        direction: Vec3::NEG_Y,
+        color: Vec3::ONE,
+        intensity: 1.0,
+        range: f32::INFINITY,
+    });
+    let mut frame = FrameRenderer::new(&gpu, &s).expect("renderer");
+    let ao = ao_settings();
+    let view = |v: DebugView, ssao: bool| FrameSettings {
+        debug_view: v,
+        ssao: if ssao { ao.ssao } else { None },
+        ..ao
+    };
+    let grab = |frame: &mut FrameRenderer, s: FrameSettings| {
+        frame.capture(&gpu, 96, 96, &s).expect("capture").hdr
+    };
+    let direct_on = grab(&mut frame, view(DebugView::DirectLight, true));
+    let direct_off = grab(&mut frame, view(DebugView::DirectLight, false));
+    assert_eq!(
+        direct_on.texels, direct_off.texels,
+        "SSAO touched direct light"
+    );
+    let lit_on = grab(&mut frame, view(DebugView::Lit, true));
+    let lit_off = grab(&mut frame, view(DebugView::Lit, false));
+    let ao_img = grab(&mut frame, view(DebugView::AmbientOcclusion, true));
+    let lm = grab(&mut frame, view(DebugView::LightMap, false));
+    // lit = direct + AO × light-map term, pixel by pixel.
+    let mut darker = 0;
+    for i in 0..lit_on.texels.len() {
+        let want = direct_off.texels[i][0] + ao_img.texels[i][0] * lm.texels[i][0];
+        let got = lit_on.texels[i][0];
+        assert!(
+            (got - want).abs() <= 2e-3 * want.max(1.0),
+            "{got} vs {want}"
+        );
+        darker += usize::from(lit_on.texels[i][0] < lit_off.texels[i][0] - 1e-3);
+    }
+    assert!(darker > 20, "SSAO darkened nothing");
+}
+
+#[test]
+fn sobel_on_normals_finds_the_crease_and_nothing_on_flat_ground() {
+    let gpu = gpu();
+    let mut v = Vec::new();
+    quad(
+        &mut v,
+        Vec3::new(-3.0, -0.5, 3.0),
+        Vec3::new(6.0, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, -4.0),
+        [ALBEDO; 3],
+    );
+    quad(
+        &mut v,
+        Vec3::new(-3.0, -0.5, -1.0),
+        Vec3::new(6.0, 0.0, 0.0),
+        Vec3::new(0.0, 4.0, 0.0),
+        [ALBEDO; 3],
+    );
+    let s = scene(v, Vec3::new(0.0, 0.6, 1.5), Vec3::new(0.0, -0.5, -1.0), 1.0);
+    let mut frame = FrameRenderer::new(&gpu, &s).expect("renderer");
+    let settings = FrameSettings {
+        sobel: Some(Sobel {
+            threshold: 0.5,
+            source: radiant_post::sobel::EdgeSource::Normal,
+            edge_color: [1.0, 0.0, 1.0],
+        }),
+        ..FrameSettings::MINIMAL
+    };
+    let (w, h) = (96u32, 96u32);
+    let c = frame.capture(&gpu, w, h, &settings).expect("capture");
+    let vp = s.camera.projection(1.0) * s.camera.view(DVec3::ZERO);
+    let magenta = |x: u32, y: u32| {
+        let p = c.ldr.at(x, y);
+        p[0] > 0.99 && p[1] < 0.01 && p[2] > 0.99
+    };
+    // The crease is parallel to the camera's x axis, so it projects to one row.
+    let crease = vp.project_point3(Vec3::new(0.0, -0.5, -1.0));
+    let cy = ((0.5 - crease.y * 0.5) * h as f32) as u32;
+    for x in [20u32, 48, 76] {
+        let marked: Vec<u32> = (0..h).filter(|&y| magenta(x, y)).collect();
+        assert!(
+            !marked.is_empty(),
+            "column {x}: no edge (crease near row {cy})"
+        );
+        assert!(
+            marked.iter().all(|&y| y.abs_diff(cy) <= 2),
+            "column {x}: edges at {marked:?}, crease at row {cy}"
+        );
+    }
+}
+
+#[test]
+fn exr_holds_linear_radiance_exactly() {
+    let gpu = gpu();
+    let mut frame = FrameRenderer::new(&gpu, &cornell()).expect("renderer");
+    let c = frame
+        .capture(&gpu, 40, 30, &FrameSettings::MINIMAL)
+        .expect("capture");
+    let path = std::env::temp_dir().join(format!("radiant-exr-{}.exr", std::process::id()));
+    radiant_render::capture::write_exr(&path, &c.hdr).expect("write");
+    let back = image::open(&path).expect("read").to_rgba32f();
+    for (a, b) in c.hdr.texels.iter().zip(back.pixels()) {
+        assert_eq!([a[0], a[1], a[2]], [b.0[0], b.0[1], b.0[2]]);
+    }
+    let _ = std::fs::remove_file(&path);
+}

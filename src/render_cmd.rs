@@ -1,0 +1,263 @@
+//! `radiant render`: bake (unless the scene has nothing to bake), then render one frame headless
+//! through the whole chain from the scene's camera.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::Context;
+use clap::Args;
+use radiant::color::Tonemap;
+use radiant::post::frame::{FrameRenderer, FrameSettings};
+use radiant::radiosity::{Bake, BakeEvent};
+use radiant::render::GpuContext;
+use radiant::render::capture::{write_exr, write_png};
+use radiant::render::lighting::DebugView;
+use serde_json::json;
+
+use crate::bake_cmd::progress_bar;
+use crate::output::{ensure_dir, write_atomic};
+use crate::{SceneArgs, SolveArgs, load_scene, parse_ff, parse_solver};
+
+/// `radiant render`.
+#[derive(Args, Debug)]
+pub(crate) struct RenderArgs {
+    #[command(flatten)]
+    pub(crate) scene: SceneArgs,
+    /// Output directory.
+    #[arg(long, short)]
+    pub(crate) out: PathBuf,
+    /// Image size, WxH.
+    #[arg(long, default_value = "1024x1024")]
+    pub(crate) size: String,
+    /// Leave SSAO out of frame.png.
+    #[arg(long)]
+    pub(crate) no_ssao: bool,
+    /// Leave bloom out of frame.png.
+    #[arg(long)]
+    pub(crate) no_bloom: bool,
+    /// Apply SSAO and bloom to frame.exr too (by default it is pure radiance).
+    #[arg(long)]
+    pub(crate) exr_effects: bool,
+    /// Tone-map operator: clamp (or none), reinhard, reinhard-extended, aces, agx, pbr-neutral.
+    #[arg(long, default_value = "aces")]
+    pub(crate) tonemap: String,
+    /// Exposure in stops.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub(crate) exposure: f32,
+    /// Debug view: lit, albedo, normal, material, lightmap, emissive, depth, ao, direct.
+    #[arg(long, default_value = "lit")]
+    pub(crate) debug: String,
+    /// Light-map texels along a triangle's side (4 to 256).
+    #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u32).range(4..=256))]
+    pub(crate) lightmap_cell: u32,
+    /// Solver for the bake.
+    #[arg(long, default_value = "gauss-seidel")]
+    pub(crate) method: String,
+    /// Form factors for the bake.
+    #[arg(long, default_value = "analytic")]
+    pub(crate) form_factors: String,
+    /// Also time each pass over this many frames (median), into render.json.
+    #[arg(long, default_value_t = 0)]
+    pub(crate) timings: usize,
+    #[command(flatten)]
+    pub(crate) solve: SolveArgs,
+}
+
+fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .with_context(|| format!("--size {s:?} must be WxH, e.g. 1280x720"))?;
+    let w: u32 = w
+        .trim()
+        .parse()
+        .with_context(|| format!("--size width {w:?}"))?;
+    let h: u32 = h
+        .trim()
+        .parse()
+        .with_context(|| format!("--size height {h:?}"))?;
+    anyhow::ensure!(
+        (1..=16384).contains(&w) && (1..=16384).contains(&h),
+        "--size {w}x{h}: each side must be 1 to 16384"
+    );
+    Ok((w, h))
+}
+
+/// Frame settings from the flags.
+fn settings(args: &RenderArgs) -> anyhow::Result<FrameSettings> {
+    let operator = Tonemap::from_name(&args.tonemap).with_context(|| {
+        format!(
+            "--tonemap {:?}: expected one of none, clamp, reinhard, reinhard-extended, aces, agx, pbr-neutral",
+            args.tonemap
+        )
+    })?;
+    let debug_view = DebugView::ALL
+        .into_iter()
+        .find(|v| v.name() == args.debug)
+        .with_context(|| {
+            format!(
+                "--debug {:?}: expected lit, albedo, normal, material, lightmap, emissive, depth, ao or direct",
+                args.debug
+            )
+        })?;
+    let mut s = FrameSettings::default();
+    s.tonemapping.operator = operator;
+    s.tonemapping.exposure = args.exposure;
+    s.debug_view = debug_view;
+    if args.no_ssao {
+        s.ssao = None;
+    }
+    if args.no_bloom {
+        s.bloom = None;
+    }
+    s.validate()?;
+    Ok(s)
+}
+
+pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
+    let (w, h) = parse_size(&args.size)?;
+    let frame_settings = settings(args)?;
+    args.solve.init_threads()?;
+    let params = args
+        .solve
+        .params(parse_solver(&args.method)?, parse_ff(&args.form_factors)?)?;
+    let (scene, source) = load_scene(&args.scene)?;
+    ensure_dir(&args.out)?;
+    let start = Instant::now();
+
+    // No emitters: nothing to bake, and nothing is allocated for it.
+    let bake = if scene.has_emitters() {
+        let pb = progress_bar(1, "form factors");
+        let bake = Bake::with_progress(&scene, &params, &|done, total| {
+            pb.set_length(total as u64);
+            pb.set_position(done as u64);
+        })?;
+        pb.set_message("solving");
+        let result = bake.run_to_end(&mut |BakeEvent::Solve(p, _)| {
+            pb.set_message(format!("solving, residual {:.1e}", p.residual));
+        })?;
+        pb.finish_and_clear();
+        Some(result)
+    } else {
+        println!("{source}: no emitters, so no bake; the frame shows punctual lights and emission");
+        None
+    };
+    let bake_s = start.elapsed().as_secs_f64();
+    let render_scene = radiant::bridge::render_scene(&scene, bake.as_ref(), args.lightmap_cell)?;
+
+    let gpu = GpuContext::headless()?;
+    let mut frame = FrameRenderer::new(&gpu, &render_scene)?;
+    let t = Instant::now();
+    let png = frame.capture(&gpu, w, h, &frame_settings)?;
+    let frame_ms = t.elapsed().as_secs_f64() * 1e3;
+    let graph = frame.report().cloned();
+    let exr_settings = if args.exr_effects {
+        frame_settings
+    } else {
+        FrameSettings {
+            ssao: None,
+            bloom: None,
+            ..frame_settings
+        }
+    };
+    let exr = if exr_settings == frame_settings {
+        png.hdr.clone()
+    } else {
+        frame.capture(&gpu, w, h, &exr_settings)?.hdr
+    };
+    write_png(&args.out.join("frame.png"), &png.ldr)?;
+    write_exr(&args.out.join("frame.exr"), &exr)?;
+
+    let mut timings = serde_json::Value::Null;
+    if args.timings > 0 {
+        let target = gpu
+            .device
+            .create_texture(&radiant::render::wgpu::TextureDescriptor {
+                label: Some("timing_target"),
+                size: radiant::render::wgpu::Extent3d {
+                    width: w,
+                    height: h,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: radiant::render::wgpu::TextureDimension::D2,
+                format: radiant::render::wgpu::TextureFormat::Rgba8UnormSrgb,
+                usage: radiant::render::wgpu::TextureUsages::RENDER_ATTACHMENT,
+                view_formats: &[],
+            });
+        let view = target.create_view(&Default::default());
+        let mut runs = Vec::new();
+        let mut gpu_clock = false;
+        for _ in 0..args.timings {
+            let t = frame.render_timed(
+                &gpu,
+                &view,
+                w,
+                h,
+                radiant::render::wgpu::TextureFormat::Rgba8UnormSrgb,
+                &frame_settings,
+            )?;
+            gpu_clock = t.gpu;
+            runs.push(t.passes);
+        }
+        let medians: Vec<(String, f64)> = runs[0]
+            .iter()
+            .enumerate()
+            .map(|(i, (name, _))| {
+                let mut v: Vec<f64> = runs.iter().map(|r| r[i].1).collect();
+                v.sort_by(f64::total_cmp);
+                (name.to_string(), v[v.len() / 2])
+            })
+            .collect();
+        println!(
+            "per-pass times, median of {} frames ({}):",
+            args.timings,
+            if gpu_clock {
+                "GPU timestamps"
+            } else {
+                "CPU wall time per pass"
+            }
+        );
+        for (name, ms) in &medians {
+            println!("  {name:<24} {ms:8.3} ms");
+        }
+        println!(
+            "  {:<24} {:8.3} ms",
+            "total",
+            medians.iter().map(|m| m.1).sum::<f64>()
+        );
+        timings = json!({
+            "frames": args.timings,
+            "clock": if gpu_clock { "gpu" } else { "cpu" },
+            "median_ms": medians.iter().map(|(n, ms)| json!({"pass": n, "ms": ms})).collect::<Vec<_>>(),
+        });
+    }
+
+    let report = json!({
+        "scene": source,
+        "adapter": format!("{} ({:?})", gpu.info.name, gpu.info.backend),
+        "size": [w, h],
+        "baked": bake.is_some(),
+        "bake_s": bake_s,
+        "elements": bake.as_ref().map(|b| b.mesh.element_count()),
+        "first_frame_ms": frame_ms,
+        "graph": graph.as_ref().map(|g| json!({
+            "passes": g.passes,
+            "transient_textures": g.virtual_textures,
+            "allocations": g.physical_textures.len(),
+            "bytes": g.bytes,
+        })),
+        "exr": if args.exr_effects { "with the frame's effects" } else { "radiance: no SSAO, no bloom" },
+        "timings": timings,
+    });
+    write_atomic(
+        &args.out.join("render.json"),
+        serde_json::to_string_pretty(&report)?.as_bytes(),
+    )?;
+    println!(
+        "{source}: {w}×{h} on {}; wrote {}/frame.png, frame.exr, render.json",
+        gpu.info.name,
+        args.out.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,159 @@
+//! `radiant render`, run as a user would, on the GPU adapter the test command provides
+//! (lavapipe in CI): outputs, linear radiance in the EXR, and bad flags as one-line errors.
+#![cfg(feature = "render")]
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn radiant() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_radiant"))
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("radiant-render-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+#[test]
+fn render_writes_a_tone_mapped_png_a_linear_exr_and_a_report() {
+    let out = tmp("ok");
+    let st = radiant()
+        .args([
+            "render",
+            "--builtin",
+            "cornell-box",
+            "--patch-size",
+            "0.3",
+            "--lightmap-cell",
+            "8",
+            "--size",
+            "96x80",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(
+        st.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let png = image::open(out.join("frame.png")).expect("png").to_rgba8();
+    assert_eq!(png.dimensions(), (96, 80));
+    let exr = image::open(out.join("frame.exr"))
+        .expect("exr")
+        .to_rgba32f();
+    assert_eq!(exr.dimensions(), (96, 80));
+    assert!(
+        exr.pixels()
+            .all(|p| p.0.iter().all(|v| v.is_finite() && *v >= 0.0))
+    );
+    // The EXR is linear radiance: the light's pixels carry its emission (17, 12, 4) plus a
+    // little reflected light, far above display white.
+    let brightest = exr.pixels().map(|p| p.0[0]).fold(0.0f32, f32::max);
+    assert!(
+        (17.0..19.0).contains(&brightest),
+        "brightest red radiance {brightest}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("json"))
+            .expect("valid json");
+    assert_eq!(report["baked"], true);
+    let passes = report["graph"]["passes"].as_array().expect("passes");
+    assert!(passes.iter().any(|p| p == "ssao_pass"));
+    assert!(passes.iter().any(|p| p == "bloom_composite_pass"));
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn disabled_effects_are_not_in_the_frame() {
+    let out = tmp("minimal");
+    let st = radiant()
+        .args([
+            "render",
+            "--builtin",
+            "cornell-box",
+            "--patch-size",
+            "0.3",
+            "--lightmap-cell",
+            "8",
+            "--size",
+            "32x32",
+            "--no-ssao",
+            "--no-bloom",
+            "--tonemap",
+            "agx",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("json"))
+            .expect("valid json");
+    assert_eq!(
+        report["graph"]["passes"],
+        serde_json::json!(["gbuffer_pass", "lighting_pass", "tonemapping_pass"])
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn a_scene_without_emitters_renders_without_a_bake() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/bad_inputs");
+    let out = tmp("dark");
+    let st = radiant()
+        .arg("render")
+        .arg(dir.join("ok_no_emitters.gltf"))
+        .args(["--size", "16x16", "--out"])
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    assert!(String::from_utf8_lossy(&st.stdout).contains("no bake"));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("json"))
+            .expect("valid json");
+    assert_eq!(report["baked"], false);
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn bad_render_flags_give_one_line() {
+    for flags in [
+        vec!["--size", "0x10"],
+        vec!["--size", "wide"],
+        vec!["--size", "99999x10"],
+        vec!["--tonemap", "filmic-magic"],
+        vec!["--debug", "xray"],
+        vec!["--exposure", "nan"],
+        vec!["--lightmap-cell", "1"],
+    ] {
+        let out = tmp("bad");
+        let st = radiant()
+            .args(["render", "--builtin", "cornell-box", "--out"])
+            .arg(&out)
+            .args(&flags)
+            .output()
+            .expect("runs");
+        let stderr = String::from_utf8_lossy(&st.stderr);
+        assert!(!st.status.success(), "{flags:?} succeeded");
+        let lines: Vec<&str> = stderr.lines().filter(|l| !l.trim().is_empty()).collect();
+        assert!(!stderr.contains("panicked"), "{flags:?}: {stderr}");
+        assert!(
+            lines.len() == 1 || stderr.starts_with("error: invalid value"),
+            "{flags:?}: {stderr}"
+        );
+        let _ = std::fs::remove_dir_all(&out);
+    }
+}
