@@ -148,6 +148,8 @@ pub struct Bake {
     times: PhaseTimes,
     warnings: Vec<String>,
     has_emitters: bool,
+    /// Per element: irradiance from the punctual lights (shadowed), for material edits.
+    direct: Option<Vec<Rgb>>,
     solver: Box<dyn Solver>,
     started: Instant,
     solving: Duration,
@@ -249,8 +251,9 @@ impl Bake {
             rho.push(s.reflectance);
             source.push(s.emission);
         }
-        if !scene.lights.is_empty() {
-            let direct = lights::direct_irradiance(&mesh, &scene.lights, &bvh);
+        let direct = (!scene.lights.is_empty())
+            .then(|| lights::direct_irradiance(&mesh, &scene.lights, &bvh));
+        if let Some(direct) = &direct {
             for i in 0..n {
                 for c in 0..3 {
                     source[i][c] += rho[i][c] * direct[i][c] / std::f64::consts::PI;
@@ -304,6 +307,7 @@ impl Bake {
             times,
             warnings,
             has_emitters,
+            direct,
             solver,
             started,
             solving: Duration::ZERO,
@@ -334,6 +338,52 @@ impl Bake {
         });
         self.last = Some(p);
         Ok(p)
+    }
+
+    /// Changes the surfaces' reflectance and emission and continues from the current solution:
+    /// the links and form factors are kept (they do not depend on colour), and the solver
+    /// warm-starts (Southwell shoots the difference, negative energy included). Returns
+    /// [`BakeError::NeedsRebuild`] when the edit turns a bake with no emitters into one with
+    /// some: it has no links to keep.
+    pub fn edit_surfaces(&mut self, surfaces: &[Surface]) -> Result<(), BakeError> {
+        if surfaces.len() != self.surfaces.len() {
+            return Err(BakeError::InvalidParameter(format!(
+                "an edit must keep the {} surfaces ({} given)",
+                self.surfaces.len(),
+                surfaces.len()
+            )));
+        }
+        let probe = Scene {
+            surfaces: surfaces.to_vec(),
+            ..Scene::default()
+        };
+        validate(&probe)?;
+        let n = self.system.len();
+        let mut rho = Vec::with_capacity(n);
+        let mut source = Vec::with_capacity(n);
+        for (i, &id) in self.mesh.leaves.iter().enumerate() {
+            let root = self.mesh.nodes[id as usize].root as usize;
+            let s = &surfaces[self.mesh.root_surface[root] as usize];
+            rho.push(s.reflectance);
+            let mut e = s.emission;
+            if let Some(d) = &self.direct {
+                for c in 0..3 {
+                    e[c] += s.reflectance[c] * d[i][c] / std::f64::consts::PI;
+                }
+            }
+            source.push(e);
+        }
+        let has_emitters = source.iter().any(|s| s.iter().any(|&v| v > 0.0));
+        if has_emitters && !self.has_emitters {
+            return Err(BakeError::NeedsRebuild);
+        }
+        let b = self.radiosity();
+        self.system = self.system.with_materials(rho, source);
+        self.surfaces = surfaces.to_vec();
+        self.has_emitters = has_emitters;
+        self.solver.warm_start(&self.system, &b);
+        self.last = None;
+        Ok(())
     }
 
     /// Seconds since the bake started.

@@ -78,6 +78,9 @@ pub enum BakeError {
     /// The system has no unique solution (reflectance 1 in a closed scene).
     #[error("the radiosity system is singular (reflectance 1 in a closed scene?)")]
     Singular,
+    /// An edit needs links the bake does not have (it had no emitters): bake again.
+    #[error("the edit adds emitters to a bake that had none: bake again")]
+    NeedsRebuild,
     /// A reference file could not be used.
     #[error("reference: {0}")]
     Reference(String),

@@ -111,6 +111,10 @@ pub trait Solver: Send {
     fn step(&mut self, sys: &System, budget: Duration) -> Result<Progress, BakeError>;
     /// The current estimate per element, as it should be displayed.
     fn radiosity(&self, sys: &System) -> Vec<Rgb>;
+    /// Continues from `b` on a changed system (same links, other materials): iterative
+    /// solvers start from `b`; Southwell shoots the residual `S + ρKb − b`, negative energy
+    /// included (George, Sillion & Greenberg 1990); the direct solver solves again.
+    fn warm_start(&mut self, sys: &System, b: &[Rgb]);
 }
 
 /// Creates a solver, starting from `B = S`.
@@ -220,6 +224,9 @@ impl Solver for Jacobi {
     fn radiosity(&self, _sys: &System) -> Vec<Rgb> {
         self.b.clone()
     }
+    fn warm_start(&mut self, _sys: &System, b: &[Rgb]) {
+        self.b = b.to_vec();
+    }
 }
 
 /// Gauss–Seidel iteration, in element order, updating node means as it goes.
@@ -297,6 +304,9 @@ impl Solver for GaussSeidel {
     }
     fn radiosity(&self, _sys: &System) -> Vec<Rgb> {
         self.b.clone()
+    }
+    fn warm_start(&mut self, _sys: &System, b: &[Rgb]) {
+        self.b = b.to_vec();
     }
 }
 
@@ -516,6 +526,25 @@ impl Solver for Southwell {
             shot = true;
         }
     }
+    fn warm_start(&mut self, sys: &System, b: &[Rgb]) {
+        // The invariant of shooting: B already holds the unshot radiosity. With the residual
+        // r = S + ρKb − b (what each element lacks, given its neighbours), B = b + r and r is
+        // unshot, exactly as a cold start has B = S and S unshot.
+        let mut r = sys.residual(b);
+        for (ri, &w) in r.iter_mut().zip(&sys.weight) {
+            if w <= 0.0 {
+                // Dead elements (inside closed geometry) see nothing and shoot nothing.
+                *ri = [0.0; 3];
+            }
+        }
+        self.b = b
+            .iter()
+            .zip(&r)
+            .map(|(bi, ri)| std::array::from_fn(|c| bi[c] + ri[c]))
+            .collect();
+        self.unshot = r;
+        self.recount_power(sys);
+    }
     fn radiosity(&self, sys: &System) -> Vec<Rgb> {
         if !self.params.ambient {
             return self.b.clone();
@@ -634,6 +663,9 @@ impl Solver for Direct {
         // A direct solve is done whatever its rounding; the residual says how well.
         p.converged = p.residual.is_finite();
         Ok(p)
+    }
+    fn warm_start(&mut self, _sys: &System, _b: &[Rgb]) {
+        self.b = None;
     }
     fn radiosity(&self, sys: &System) -> Vec<Rgb> {
         self.b.clone().unwrap_or_else(|| vec![[0.0; 3]; sys.len()])
