@@ -104,7 +104,7 @@ pub struct Progress {
 }
 
 /// A radiosity solver.
-pub trait Solver: Send {
+pub trait Solver: Send + Sync {
     /// Which solver.
     fn kind(&self) -> SolverKind;
     /// Works for about `budget` (at least one unit of work), then reports.

@@ -1,0 +1,708 @@
+//! The background, incremental bake.
+//!
+//! [`RadiosityBake`] (a resource: insert it to bake) holds the settings. Every frame, in
+//! `PostUpdate` after transform propagation, two systems run:
+//! - [`detect_scene_changes`] notes what changed among static entities and lights;
+//! - [`drive_bake`] gathers the static scene when it changed, starts or steers the worker, and
+//!   copies the worker's reports into [`BakeStatus`] and its light into [`BakedLighting`].
+//!
+//! The worker is a task on bevy's `AsyncComputeTaskPool`: it builds the bake (meshing, links,
+//! form factors) and solves one sweep (or one shot) per step, so its results do not depend on
+//! timing or thread count. The frame never waits for it. A material edit is sent to the worker,
+//! which keeps the links and warm-starts (`Bake::edit_surfaces`); a change of geometry or
+//! lights bakes again. A bake that converged, or was paused, returns to the world, ready for the
+//! next edit or for resuming.
+
+use std::sync::{Arc, Mutex, mpsc};
+use std::time::{Duration, Instant};
+
+use bevy_ecs::prelude::*;
+use bevy_tasks::{AsyncComputeTaskPool, Task, TaskPoolBuilder, futures::check_ready};
+use radiant_radiosity::bake::STALL_STEPS;
+use radiant_radiosity::metrics::{SurfaceMean, surface_means};
+use radiant_radiosity::{Bake, BakeParams, Mesh, Rgb};
+use radiant_scene::{Scene, Surface};
+
+use crate::app::{App, Plugin, PostUpdate};
+use crate::scene::{
+    GlobalTransform, Material, PunctualLight, Static, TransformSystems, gather_scene,
+};
+
+/// Radiosity baking of the world's [`Static`] geometry. Present → the world is baked and
+/// rebaked on edits; absent → nothing is baked.
+#[derive(Resource, Clone, Debug)]
+pub struct RadiosityBake {
+    /// Method, form factors, patch size, tolerance (default: `BakeParams::default()`).
+    pub params: BakeParams,
+    /// Least time between two published light updates before convergence (default: 100 ms).
+    pub publish_interval: Duration,
+    /// Worker threads for the bake's parallel parts, `None` for all cores (default: `None`).
+    /// Results are the same for any count.
+    pub threads: Option<usize>,
+}
+
+impl Default for RadiosityBake {
+    fn default() -> Self {
+        Self {
+            params: BakeParams::default(),
+            publish_interval: Duration::from_millis(100),
+            threads: None,
+        }
+    }
+}
+
+/// Where the bake is.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BakePhase {
+    /// No bake has been asked for (no [`RadiosityBake`], or nothing gathered yet).
+    #[default]
+    Idle,
+    /// The static scene has no emitters and no lights: nothing to bake, nothing allocated.
+    NoEmitters,
+    /// Meshing, links and form factors.
+    Building,
+    /// Iterating.
+    Solving,
+    /// Met the tolerance (or stopped converging; see `warning`).
+    Converged,
+    /// Paused by [`BakeControl::pause`].
+    Paused,
+    /// Cancelled by [`BakeControl::cancel`]; the last published light is kept.
+    Cancelled,
+    /// Failed; see `error`.
+    Failed,
+}
+
+/// Progress of the bake, for UIs and tests.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct BakeStatus {
+    /// The phase.
+    pub phase: BakePhase,
+    /// Progress of the phase in [0, 1] (building: elements linked; solving: log-residual
+    /// progress toward the tolerance).
+    pub progress: f64,
+    /// Estimated relative error of the current solution: the residual over `1 − ρ̂`.
+    pub estimated_error: f64,
+    /// (seconds since this bake started, estimated error) after each step.
+    pub history: Vec<(f64, f64)>,
+    /// Seconds to the tolerance at the recent rate, when it can be told.
+    pub eta_s: Option<f64>,
+    /// Sweeps (or shots) of the solver since the bake was built.
+    pub iterations: u64,
+    /// Sweeps (or shots) since the last material edit: the rebake's work.
+    pub iterations_since_edit: u64,
+    /// Bakes built from scratch (geometry or light changes).
+    pub builds: u64,
+    /// Material edits applied by warm start.
+    pub edits: u64,
+    /// True while the published light no longer matches the scene (an edit is being baked).
+    pub stale: bool,
+    /// Elements and links of the current bake.
+    pub elements: usize,
+    /// Links of the current bake.
+    pub links: usize,
+    /// The error, when `phase` is `Failed`.
+    pub error: Option<String>,
+    /// A warning (the solver stopped converging), if any.
+    pub warning: Option<String>,
+}
+
+/// The latest published bake result.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct BakedLighting {
+    /// Increments on every publication.
+    pub generation: u64,
+    /// The element hierarchy the radiosity refers to.
+    pub mesh: Option<Arc<Mesh>>,
+    /// Radiosity per element (emissive units).
+    pub radiosity: Arc<Vec<Rgb>>,
+    /// Area-weighted mean radiosity per static surface, in gather order.
+    pub surfaces: Vec<SurfaceMean>,
+    /// The estimated error when it was published.
+    pub estimated_error: f64,
+}
+
+/// Requests to the bake; take effect on the next frame.
+#[derive(Resource, Clone, Copy, Debug, Default)]
+pub struct BakeControl {
+    paused: bool,
+    cancel: bool,
+    rebake: bool,
+}
+
+impl BakeControl {
+    /// Stops solving after the current step; the bake is kept.
+    pub fn pause(&mut self) {
+        self.paused = true;
+    }
+    /// Continues a paused bake.
+    pub fn resume(&mut self) {
+        self.paused = false;
+    }
+    /// Stops and drops the bake; the last published light stays.
+    pub fn cancel(&mut self) {
+        self.cancel = true;
+    }
+    /// Bakes again from scratch (after a cancel, say).
+    pub fn rebake(&mut self) {
+        self.rebake = true;
+    }
+    /// Whether pause is requested.
+    pub fn is_paused(&self) -> bool {
+        self.paused
+    }
+}
+
+/// The bake's systems.
+#[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct BakeSystems;
+
+/// Background baking: add it with [`crate::scene::ScenePlugin`] and insert [`RadiosityBake`].
+pub struct BakePlugin;
+
+impl Plugin for BakePlugin {
+    fn build(&self, app: &mut App) {
+        app.init_resource::<BakeStatus>()
+            .init_resource::<BakedLighting>()
+            .init_resource::<BakeControl>()
+            .init_resource::<SceneChanges>()
+            .init_resource::<BakeWorker>()
+            .configure_sets(PostUpdate, BakeSystems.after(TransformSystems))
+            .add_systems(
+                PostUpdate,
+                (detect_scene_changes, drive_bake)
+                    .chain()
+                    .in_set(BakeSystems),
+            );
+    }
+}
+
+/// What changed since the last frame.
+#[derive(Resource, Clone, Copy, Debug, Default)]
+pub struct SceneChanges {
+    /// Static geometry was added, removed, moved or reshaped, or a light changed.
+    pub geometry: bool,
+    /// Only materials of static surfaces changed.
+    pub materials: bool,
+}
+
+/// Notes changes to static geometry, materials and lights (Bevy change detection).
+#[expect(clippy::type_complexity, reason = "change-detection filters")]
+pub fn detect_scene_changes(
+    geometry: Query<
+        (),
+        (
+            With<Static>,
+            Or<(
+                Added<Static>,
+                Changed<GlobalTransform>,
+                Changed<crate::scene::Geometry>,
+            )>,
+        ),
+    >,
+    materials: Query<(), (With<Static>, Changed<Material>)>,
+    lights: Query<
+        (),
+        Or<(
+            Changed<PunctualLight>,
+            (With<PunctualLight>, Changed<GlobalTransform>),
+        )>,
+    >,
+    mut removed_static: RemovedComponents<Static>,
+    mut removed_lights: RemovedComponents<PunctualLight>,
+    mut changes: ResMut<SceneChanges>,
+) {
+    let removed = removed_static.read().count() + removed_lights.read().count() > 0;
+    if !geometry.is_empty() || !lights.is_empty() || removed {
+        changes.geometry = true;
+    }
+    if !materials.is_empty() {
+        changes.materials = true;
+    }
+}
+
+enum Control {
+    Pause,
+    Cancel,
+    Edit(Vec<Surface>, u64),
+}
+
+enum Report {
+    Building(usize, usize),
+    Built {
+        mesh: Arc<Mesh>,
+        links: usize,
+        contraction: f64,
+    },
+    Edited,
+    Step {
+        t: f64,
+        iterations: u64,
+        residual: f64,
+    },
+    Publish {
+        radiosity: Vec<Rgb>,
+        surfaces: Vec<SurfaceMean>,
+        epoch: u64,
+        converged: bool,
+    },
+    Warning(String),
+}
+
+enum Outcome {
+    Done(Box<Bake>, u64),
+    Paused(Box<Bake>, u64),
+    Cancelled,
+    NeedsRebuild,
+    Failed(String),
+}
+
+enum Start {
+    Build(Arc<Scene>),
+    Continue(Box<Bake>, Option<Vec<Surface>>),
+}
+
+/// The worker's handles, and what waits to be done.
+#[derive(Resource, Default)]
+pub struct BakeWorker {
+    task: Option<Task<Outcome>>,
+    to_worker: Option<mpsc::Sender<Control>>,
+    from_worker: Option<Mutex<mpsc::Receiver<Report>>>,
+    idle: Option<(Box<Bake>, u64)>,
+    rebuild: Option<Arc<Scene>>,
+    edit: Option<Vec<Surface>>,
+    /// Increments on every scene change; publications carry the epoch they match.
+    epoch: u64,
+    contraction: f64,
+    tolerance: f64,
+    started: Option<Instant>,
+    iterations_at_edit: u64,
+    mesh: Option<Arc<Mesh>>,
+    pool: Option<(usize, Arc<rayon::ThreadPool>)>,
+}
+
+impl BakeWorker {
+    /// Whether a worker task exists (building or solving).
+    pub fn is_running(&self) -> bool {
+        self.task.is_some()
+    }
+    /// Whether a bake (running or idle) holds memory.
+    pub fn holds_a_bake(&self) -> bool {
+        self.task.is_some() || self.idle.is_some()
+    }
+}
+
+fn work(
+    start: Start,
+    params: BakeParams,
+    publish_interval: Duration,
+    mut epoch: u64,
+    rx: mpsc::Receiver<Control>,
+    tx: mpsc::Sender<Report>,
+) -> Outcome {
+    let send = |r: Report| {
+        let _ = tx.send(r);
+    };
+    let mut bake = match start {
+        Start::Build(scene) => {
+            let progress = |d: usize, t: usize| {
+                let _ = tx.send(Report::Building(d, t));
+            };
+            match Bake::with_progress(&scene, &params, &progress) {
+                Ok(b) => {
+                    send(Report::Built {
+                        mesh: Arc::new(b.mesh.clone()),
+                        links: b.system.links.len(),
+                        contraction: b.system.contraction(),
+                    });
+                    Box::new(b)
+                }
+                Err(e) => return Outcome::Failed(e.to_string()),
+            }
+        }
+        Start::Continue(mut b, edit) => {
+            if let Some(s) = edit {
+                match b.edit_surfaces(&s) {
+                    Ok(()) => send(Report::Edited),
+                    Err(radiant_radiosity::BakeError::NeedsRebuild) => {
+                        return Outcome::NeedsRebuild;
+                    }
+                    Err(e) => return Outcome::Failed(e.to_string()),
+                }
+            }
+            b
+        }
+    };
+    let t0 = Instant::now();
+    let mut last_publish: Option<Instant> = None;
+    let (mut best, mut since_best) = (f64::INFINITY, 0u32);
+    loop {
+        while let Ok(c) = rx.try_recv() {
+            match c {
+                Control::Cancel => return Outcome::Cancelled,
+                Control::Pause => return Outcome::Paused(bake, epoch),
+                Control::Edit(s, e) => match bake.edit_surfaces(&s) {
+                    Ok(()) => {
+                        epoch = e;
+                        (best, since_best) = (f64::INFINITY, 0);
+                        send(Report::Edited);
+                    }
+                    Err(radiant_radiosity::BakeError::NeedsRebuild) => {
+                        return Outcome::NeedsRebuild;
+                    }
+                    Err(err) => return Outcome::Failed(err.to_string()),
+                },
+            }
+        }
+        // One sweep (or one shot) per step: the same sequence whatever the timing.
+        let p = match bake.step(Duration::ZERO) {
+            Ok(p) => p,
+            Err(e) => return Outcome::Failed(e.to_string()),
+        };
+        send(Report::Step {
+            t: t0.elapsed().as_secs_f64(),
+            iterations: p.iterations,
+            residual: p.residual,
+        });
+        if p.residual < 0.99 * best {
+            (best, since_best) = (p.residual, 0);
+        } else {
+            since_best += 1;
+        }
+        let stalled = since_best >= STALL_STEPS || !p.residual.is_finite();
+        if stalled {
+            send(Report::Warning(format!(
+                "the solver stopped converging (residual {:.2e}); reflectance 1 in a closed scene?",
+                p.residual
+            )));
+        }
+        let done = p.converged || stalled;
+        if done || last_publish.is_none_or(|t| t.elapsed() >= publish_interval) {
+            let radiosity = bake.radiosity();
+            let surfaces = surface_means(&bake.surfaces, &bake.mesh, &radiosity);
+            send(Report::Publish {
+                radiosity,
+                surfaces,
+                epoch,
+                converged: done,
+            });
+            last_publish = Some(Instant::now());
+        }
+        if done {
+            return Outcome::Done(bake, epoch);
+        }
+    }
+}
+
+fn thread_pool(worker: &mut BakeWorker, threads: usize) -> Option<Arc<rayon::ThreadPool>> {
+    if let Some((n, p)) = &worker.pool
+        && *n == threads
+    {
+        return Some(p.clone());
+    }
+    match rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|i| format!("radiant-bake-{i}"))
+        .build()
+    {
+        Ok(p) => {
+            let p = Arc::new(p);
+            worker.pool = Some((threads, p.clone()));
+            Some(p)
+        }
+        Err(e) => {
+            tracing::warn!("bake thread pool: {e}; using the global pool");
+            None
+        }
+    }
+}
+
+fn spawn(worker: &mut BakeWorker, settings: &RadiosityBake, start: Start) {
+    let (to_worker, rx) = mpsc::channel();
+    let (tx, from_worker) = mpsc::channel();
+    let params = settings.params;
+    let interval = settings.publish_interval;
+    let epoch = worker.epoch;
+    let pool = settings.threads.and_then(|n| thread_pool(worker, n.max(1)));
+    // Bevy's async compute pool, if an app set it up; else a small one (the bake's parallel
+    // loops run on rayon, not here).
+    let task_pool = AsyncComputeTaskPool::get_or_init(|| {
+        TaskPoolBuilder::new()
+            .num_threads(2)
+            .thread_name("radiant-async-compute".into())
+            .build()
+    });
+    let task = task_pool.spawn(async move {
+        match pool {
+            Some(p) => p.install(move || work(start, params, interval, epoch, rx, tx)),
+            None => work(start, params, interval, epoch, rx, tx),
+        }
+    });
+    worker.task = Some(task);
+    worker.to_worker = Some(to_worker);
+    worker.from_worker = Some(Mutex::new(from_worker));
+    worker.tolerance = params.solver_params.tolerance;
+}
+
+fn drain(world: &mut World) {
+    let reports: Vec<Report> = {
+        let w = world.resource::<BakeWorker>();
+        match &w.from_worker {
+            Some(rx) => match rx.lock() {
+                Ok(rx) => rx.try_iter().collect(),
+                Err(_) => Vec::new(),
+            },
+            None => Vec::new(),
+        }
+    };
+    for r in reports {
+        match r {
+            Report::Building(d, t) => {
+                let mut s = world.resource_mut::<BakeStatus>();
+                s.phase = BakePhase::Building;
+                s.progress = if t > 0 { d as f64 / t as f64 } else { 0.0 };
+            }
+            Report::Built {
+                mesh,
+                links,
+                contraction,
+            } => {
+                let elements = mesh.element_count();
+                let mut w = world.resource_mut::<BakeWorker>();
+                w.contraction = contraction;
+                w.mesh = Some(mesh);
+                w.started = Some(Instant::now());
+                w.iterations_at_edit = 0;
+                let mut s = world.resource_mut::<BakeStatus>();
+                s.phase = BakePhase::Solving;
+                s.elements = elements;
+                s.links = links;
+                s.history.clear();
+                s.iterations = 0;
+                s.builds += 1;
+                s.warning = None;
+            }
+            Report::Edited => {
+                let iterations = world.resource::<BakeStatus>().iterations;
+                world.resource_mut::<BakeWorker>().iterations_at_edit = iterations;
+                let mut s = world.resource_mut::<BakeStatus>();
+                s.edits += 1;
+                s.iterations_since_edit = 0;
+                s.warning = None;
+            }
+            Report::Step {
+                t,
+                iterations,
+                residual,
+            } => {
+                let (rho, tol, at_edit) = {
+                    let w = world.resource::<BakeWorker>();
+                    (w.contraction, w.tolerance, w.iterations_at_edit)
+                };
+                let err = residual / (1.0 - rho).clamp(1e-9, 1.0);
+                let mut s = world.resource_mut::<BakeStatus>();
+                s.phase = BakePhase::Solving;
+                s.iterations = iterations;
+                s.iterations_since_edit = iterations.saturating_sub(at_edit);
+                s.estimated_error = err;
+                s.progress = if err > 0.0 && err.is_finite() {
+                    (err.ln() / tol.ln()).clamp(0.0, 1.0)
+                } else {
+                    1.0
+                };
+                s.history.push((t, err));
+                s.eta_s = eta(&s.history, tol);
+            }
+            Report::Publish {
+                radiosity,
+                surfaces,
+                epoch,
+                converged,
+            } => {
+                let (current, mesh) = {
+                    let w = world.resource::<BakeWorker>();
+                    (w.epoch, w.mesh.clone())
+                };
+                let err = world.resource::<BakeStatus>().estimated_error;
+                let mut l = world.resource_mut::<BakedLighting>();
+                l.generation += 1;
+                l.mesh = mesh;
+                l.radiosity = Arc::new(radiosity);
+                l.surfaces = surfaces;
+                l.estimated_error = err;
+                let mut s = world.resource_mut::<BakeStatus>();
+                s.stale = epoch < current;
+                if converged && epoch == current {
+                    s.phase = BakePhase::Converged;
+                    s.progress = 1.0;
+                    s.eta_s = Some(0.0);
+                }
+            }
+            Report::Warning(w) => world.resource_mut::<BakeStatus>().warning = Some(w),
+        }
+    }
+}
+
+/// Seconds to reach `tol` at the rate of the last few steps (log-linear convergence).
+fn eta(history: &[(f64, f64)], tol: f64) -> Option<f64> {
+    let n = history.len();
+    if n < 3 {
+        return None;
+    }
+    let (t0, e0) = history[n.saturating_sub(8)];
+    let (t1, e1) = history[n - 1];
+    if e1 <= tol {
+        return Some(0.0);
+    }
+    let rate = (e0.ln() - e1.ln()) / (t1 - t0).max(1e-9);
+    (rate > 0.0 && rate.is_finite()).then(|| (e1.ln() - tol.ln()) / rate)
+}
+
+fn stop(world: &mut World) {
+    let mut w = world.resource_mut::<BakeWorker>();
+    if let Some(tx) = &w.to_worker {
+        let _ = tx.send(Control::Cancel);
+    }
+    // Dropping the task detaches nothing: the worker sees Cancel at its next step and ends.
+    w.task = None;
+    w.to_worker = None;
+    w.from_worker = None;
+    w.idle = None;
+    w.rebuild = None;
+    w.edit = None;
+}
+
+/// Starts, steers and reports on the worker. Exclusive: it gathers the scene when it changed.
+pub fn drive_bake(world: &mut World) {
+    let Some(settings) = world.get_resource::<RadiosityBake>().cloned() else {
+        if world.resource::<BakeWorker>().holds_a_bake() {
+            stop(world);
+            world.resource_mut::<BakeStatus>().phase = BakePhase::Idle;
+        }
+        return;
+    };
+    let changes = std::mem::take(&mut *world.resource_mut::<SceneChanges>());
+    drain(world);
+
+    // A finished task hands the bake back.
+    let outcome = {
+        let mut w = world.resource_mut::<BakeWorker>();
+        match w.task.as_mut().and_then(check_ready) {
+            Some(o) => {
+                w.task = None;
+                w.to_worker = None;
+                Some(o)
+            }
+            None => None,
+        }
+    };
+    if let Some(o) = outcome {
+        drain(world);
+        match o {
+            Outcome::Done(bake, epoch) => {
+                world.resource_mut::<BakeWorker>().idle = Some((bake, epoch));
+            }
+            Outcome::Paused(bake, epoch) => {
+                world.resource_mut::<BakeWorker>().idle = Some((bake, epoch));
+                world.resource_mut::<BakeStatus>().phase = BakePhase::Paused;
+            }
+            Outcome::Cancelled => {}
+            Outcome::NeedsRebuild => {
+                let scene = Arc::new(gather_scene(world));
+                world.resource_mut::<BakeWorker>().rebuild = Some(scene);
+            }
+            Outcome::Failed(e) => {
+                tracing::error!("bake failed: {e}");
+                let mut s = world.resource_mut::<BakeStatus>();
+                s.phase = BakePhase::Failed;
+                s.error = Some(e);
+            }
+        }
+    }
+
+    // Requests.
+    let control = *world.resource::<BakeControl>();
+    if control.cancel {
+        stop(world);
+        world.resource_mut::<BakeControl>().cancel = false;
+        world.resource_mut::<BakeStatus>().phase = BakePhase::Cancelled;
+        return;
+    }
+    if control.paused
+        && let Some(tx) = &world.resource::<BakeWorker>().to_worker
+    {
+        let _ = tx.send(Control::Pause);
+    }
+
+    // Changes: geometry and lights bake again; materials are edited in place.
+    let first = world.resource::<BakeStatus>().phase == BakePhase::Idle;
+    if changes.geometry || control.rebake || first {
+        world.resource_mut::<BakeControl>().rebake = false;
+        let scene = gather_scene(world);
+        if scene.triangles.is_empty() && !changes.geometry && first {
+            // Nothing spawned yet.
+            return;
+        }
+        if !scene.has_emitters() {
+            stop(world);
+            let mut s = world.resource_mut::<BakeStatus>();
+            s.phase = BakePhase::NoEmitters;
+            s.stale = false;
+            world.insert_resource(BakedLighting::default());
+            return;
+        }
+        let mut w = world.resource_mut::<BakeWorker>();
+        w.epoch += 1;
+        w.rebuild = Some(Arc::new(scene));
+        w.edit = None;
+        w.idle = None;
+        if let Some(tx) = &w.to_worker {
+            let _ = tx.send(Control::Cancel);
+        }
+        world.resource_mut::<BakeStatus>().stale = true;
+    } else if changes.materials {
+        let scene = gather_scene(world);
+        if !scene.has_emitters() {
+            stop(world);
+            world.resource_mut::<BakeStatus>().phase = BakePhase::NoEmitters;
+            world.insert_resource(BakedLighting::default());
+            return;
+        }
+        let mut w = world.resource_mut::<BakeWorker>();
+        w.epoch += 1;
+        let epoch = w.epoch;
+        if w.rebuild.is_some() || (w.task.is_none() && w.idle.is_none()) {
+            // No bake to edit (none yet, or the scene had no emitters): build one.
+            w.rebuild = Some(Arc::new(scene));
+        } else if let Some(tx) = &w.to_worker {
+            let _ = tx.send(Control::Edit(scene.surfaces, epoch));
+        } else {
+            w.edit = Some(scene.surfaces);
+        }
+        world.resource_mut::<BakeStatus>().stale = true;
+    }
+
+    // Start work when the worker is free.
+    if world.resource::<BakeWorker>().task.is_some() || control.paused {
+        return;
+    }
+    let mut w = world.resource_mut::<BakeWorker>();
+    if let Some(scene) = w.rebuild.take() {
+        w.idle = None;
+        spawn(&mut w, &settings, Start::Build(scene));
+        let mut s = world.resource_mut::<BakeStatus>();
+        s.phase = BakePhase::Building;
+        s.progress = 0.0;
+        s.error = None;
+    } else if let Some((bake, _)) = w.idle.take() {
+        let edit = w.edit.take();
+        let resuming = world.resource::<BakeStatus>().phase == BakePhase::Paused;
+        let mut w = world.resource_mut::<BakeWorker>();
+        if edit.is_some() || resuming {
+            spawn(&mut w, &settings, Start::Continue(bake, edit));
+            world.resource_mut::<BakeStatus>().phase = BakePhase::Solving;
+        } else {
+            w.idle = Some((bake, w.epoch));
+        }
+    }
+}

@@ -1,0 +1,231 @@
+//! Headless ECS system tests of the background bake: a world, the plugins, frames stepped until
+//! the bake converges; no GPU, no window.
+
+use std::time::Duration;
+
+use radiant_ecs::prelude::*;
+use radiant_radiosity::{Bake, BakeParams, Rgb, SolverKind};
+
+fn params() -> BakeParams {
+    let mut p = BakeParams::default();
+    p.mesh.patch_size = 0.3;
+    p.solver = SolverKind::GaussSeidel;
+    p.solver_params.tolerance = 1e-6;
+    p
+}
+
+fn cornell_app(threads: Option<usize>) -> App {
+    let mut app = App::new();
+    app.add_plugins(RadiantPlugins)
+        .insert_resource(RadiosityBake {
+            params: params(),
+            threads,
+            ..RadiosityBake::default()
+        });
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    spawn_scene(&mut app.world, &scene);
+    app
+}
+
+/// Steps frames until the bake has converged on the current scene (60 s at most).
+fn converge(app: &mut App) {
+    let t = std::time::Instant::now();
+    let ok = app.run_until(u64::MAX, Duration::from_millis(1), |w| {
+        let s = w.resource::<BakeStatus>();
+        assert!(s.phase != BakePhase::Failed, "bake failed: {:?}", s.error);
+        (s.phase == BakePhase::Converged && !s.stale) || t.elapsed() > Duration::from_secs(60)
+    });
+    assert!(
+        ok && t.elapsed() < Duration::from_secs(60),
+        "no convergence in 60 s"
+    );
+}
+
+/// A fresh bake of what the world holds now, as the CLI would run it.
+fn fresh(app: &mut App) -> radiant_radiosity::BakeResult {
+    let scene = gather_scene(&mut app.world);
+    Bake::new(&scene, &params())
+        .expect("bake")
+        .run_to_end(&mut |_| {})
+        .expect("solve")
+}
+
+fn assert_surfaces_close(app: &App, want: &radiant_radiosity::BakeResult, rel: f64) {
+    let got = &app.world.resource::<BakedLighting>().surfaces;
+    assert_eq!(got.len(), want.surfaces.len());
+    for (a, b) in got.iter().zip(&want.surfaces) {
+        assert_eq!(a.name, b.name);
+        for c in 0..3 {
+            let d = (a.mean[c] - b.mean[c]).abs() / b.mean[c].abs().max(1e-3);
+            assert!(d <= rel, "{}: {:?} vs {:?}", a.name, a.mean, b.mean);
+        }
+    }
+}
+
+fn set_material(app: &mut App, name: &str, f: impl Fn(&mut Material)) {
+    let mut q = app.world.query::<(&Name, &mut Material)>();
+    let mut hit = 0;
+    for (n, mut m) in q.iter_mut(&mut app.world) {
+        if n.as_str() == name {
+            f(&mut m);
+            hit += 1;
+        }
+    }
+    assert!(hit > 0, "no surface named {name}");
+}
+
+#[test]
+fn the_world_bakes_to_the_cli_answer() {
+    let mut app = cornell_app(None);
+    converge(&mut app);
+    let status = app.world.resource::<BakeStatus>().clone();
+    assert_eq!(status.builds, 1);
+    assert!(status.estimated_error <= 1e-6, "{}", status.estimated_error);
+    assert!(status.history.len() >= 2 && status.eta_s == Some(0.0));
+    let want = fresh(&mut app);
+    assert_surfaces_close(&app, &want, 1e-4);
+    let lit = app.world.resource::<BakedLighting>();
+    assert_eq!(lit.radiosity.len(), want.radiosity.len());
+    assert!(lit.mesh.is_some() && lit.generation >= 1);
+}
+
+#[test]
+fn a_material_edit_rebakes_by_warm_start_to_a_fresh_bake_with_less_work() {
+    let mut app = cornell_app(None);
+    converge(&mut app);
+    set_material(&mut app, "left_wall", |m| m.reflectance = [0.1, 0.2, 0.7]);
+    app.update();
+    assert!(
+        app.world.resource::<BakeStatus>().stale,
+        "the edit is not marked stale"
+    );
+    converge(&mut app);
+    let status = app.world.resource::<BakeStatus>().clone();
+    assert_eq!((status.builds, status.edits), (1, 1), "{status:?}");
+    let want = fresh(&mut app);
+    // The fresh bake refines links for the new colours; the edited one keeps the old links.
+    assert_surfaces_close(&app, &want, 0.02);
+    assert!(
+        status.iterations_since_edit < want.report.iterations,
+        "rebake took {} sweeps, a fresh bake {}",
+        status.iterations_since_edit,
+        want.report.iterations
+    );
+}
+
+#[test]
+fn moving_a_block_bakes_the_moved_scene() {
+    let mut app = cornell_app(None);
+    converge(&mut app);
+    let mut q = app.world.query::<(&Name, &mut Transform)>();
+    for (n, mut t) in q.iter_mut(&mut app.world) {
+        if n.as_str().starts_with("short_block") {
+            t.translation.x += 0.04;
+        }
+    }
+    app.update();
+    converge(&mut app);
+    assert_eq!(app.world.resource::<BakeStatus>().builds, 2);
+    let want = fresh(&mut app);
+    // The moved geometry really moved.
+    let scene = gather_scene(&mut app.world);
+    let original = radiant_scene::builtin("cornell-box").expect("builtin");
+    assert_ne!(scene.triangles, original.triangles);
+    assert_surfaces_close(&app, &want, 1e-4);
+}
+
+#[test]
+fn without_emitters_no_bake_exists() {
+    let mut scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    for s in &mut scene.surfaces {
+        s.emission = [0.0; 3];
+    }
+    let mut app = App::new();
+    app.add_plugins(RadiantPlugins)
+        .insert_resource(RadiosityBake {
+            params: params(),
+            ..RadiosityBake::default()
+        });
+    spawn_scene(&mut app.world, &scene);
+    for _ in 0..5 {
+        app.update();
+    }
+    assert_eq!(
+        app.world.resource::<BakeStatus>().phase,
+        BakePhase::NoEmitters
+    );
+    assert!(!app.world.resource::<BakeWorker>().holds_a_bake());
+    assert!(app.world.resource::<BakedLighting>().radiosity.is_empty());
+
+    // Switching the light on bakes; switching it off again drops the bake.
+    set_material(&mut app, "light", |m| m.emission = [17.0, 12.0, 4.0]);
+    converge(&mut app);
+    set_material(&mut app, "light", |m| m.emission = [0.0; 3]);
+    app.update();
+    assert_eq!(
+        app.world.resource::<BakeStatus>().phase,
+        BakePhase::NoEmitters
+    );
+    assert!(!app.world.resource::<BakeWorker>().holds_a_bake());
+
+    // Without the RadiosityBake resource nothing is baked at all.
+    let mut app = App::new();
+    app.add_plugins(RadiantPlugins);
+    spawn_scene(
+        &mut app.world,
+        &radiant_scene::builtin("cornell-box").expect("builtin"),
+    );
+    for _ in 0..5 {
+        app.update();
+    }
+    assert_eq!(app.world.resource::<BakeStatus>().phase, BakePhase::Idle);
+    assert!(!app.world.resource::<BakeWorker>().holds_a_bake());
+}
+
+#[test]
+fn one_and_two_threads_give_identical_light() {
+    let run = |threads| -> Vec<Rgb> {
+        let mut app = cornell_app(Some(threads));
+        converge(&mut app);
+        app.world.resource::<BakedLighting>().radiosity.to_vec()
+    };
+    assert_eq!(run(1), run(2));
+}
+
+#[test]
+fn pause_resume_and_cancel() {
+    let mut app = cornell_app(None);
+    // Pause as soon as solving starts.
+    app.run_until(100_000, Duration::from_millis(1), |w| {
+        w.resource::<BakeStatus>().phase == BakePhase::Solving
+    });
+    app.world.resource_mut::<BakeControl>().pause();
+    app.run_until(10_000, Duration::from_millis(1), |w| {
+        w.resource::<BakeStatus>().phase == BakePhase::Paused
+    });
+    assert_eq!(app.world.resource::<BakeStatus>().phase, BakePhase::Paused);
+    let it = app.world.resource::<BakeStatus>().iterations;
+    for _ in 0..20 {
+        app.update();
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    assert_eq!(
+        app.world.resource::<BakeStatus>().iterations,
+        it,
+        "paused but iterating"
+    );
+    app.world.resource_mut::<BakeControl>().resume();
+    converge(&mut app);
+    let published = app.world.resource::<BakedLighting>().generation;
+    app.world.resource_mut::<BakeControl>().cancel();
+    app.update();
+    assert_eq!(
+        app.world.resource::<BakeStatus>().phase,
+        BakePhase::Cancelled
+    );
+    assert!(!app.world.resource::<BakeWorker>().holds_a_bake());
+    // Cancelling keeps the last good light.
+    let lit = app.world.resource::<BakedLighting>();
+    assert_eq!(lit.generation, published);
+    assert!(!lit.radiosity.is_empty());
+}
