@@ -5,6 +5,7 @@
 //! - [`scene`]: glTF import with validation, the builtin Cornell box;
 //! - [`radiosity`]: meshing, form factors, solvers, error metrics, light maps (pure CPU);
 //! - [`color`]: sRGB transfer functions, CIE colorimetry and tone-map operators;
+//! - [`ecs`]: scenes as `bevy_ecs` entities, the background bake and live rebake, a headless app;
 //! - [`render`] and [`post`] (feature `render`, on by default): the wgpu render graph, passes,
 //!   post-processing and offscreen capture.
 //!
@@ -18,6 +19,7 @@
 //! ```
 
 pub use radiant_color as color;
+pub use radiant_ecs as ecs;
 #[cfg(feature = "render")]
 pub use radiant_post as post;
 pub use radiant_radiosity as radiosity;

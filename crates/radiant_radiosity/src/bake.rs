@@ -378,7 +378,7 @@ impl Bake {
             return Err(BakeError::NeedsRebuild);
         }
         let b = self.radiosity();
-        self.system = self.system.with_materials(rho, source);
+        self.system.set_materials(rho, source);
         self.surfaces = surfaces.to_vec();
         self.has_emitters = has_emitters;
         self.solver.warm_start(&self.system, &b);

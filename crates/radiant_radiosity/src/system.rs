@@ -173,6 +173,13 @@ impl System {
         sys
     }
 
+    /// Replaces reflectance and source terms in place, keeping the links (no copy of them).
+    pub fn set_materials(&mut self, rho: Vec<Rgb>, source: Vec<Rgb>) {
+        self.rho = rho;
+        self.source = source;
+        self.contraction = self.compute_contraction();
+    }
+
     /// Number of elements.
     pub fn len(&self) -> usize {
         self.area.len()
