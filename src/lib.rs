@@ -57,25 +57,6 @@ pub mod bridge {
         scene: &Scene,
         bake: &BakeResult,
     ) {
-        render_scene.fill_lightmap(|t| {
-            let Some(tri) = scene.triangles.get(t.triangle) else {
-                return [0.0; 3];
-            };
-            let surface = &scene.surfaces[tri.surface as usize];
-            let e = bake
-                .mesh
-                .locate(t.triangle as u32, f64::from(t.u), f64::from(t.v));
-            let Some(b) = bake.radiosity.get(e as usize) else {
-                return [0.0; 3];
-            };
-            [0, 1, 2].map(|c| {
-                let rho = surface.reflectance[c];
-                if rho > 1e-6 {
-                    (((b[c] - surface.emission[c]) / rho).max(0.0)) as f32
-                } else {
-                    0.0
-                }
-            })
-        });
+        radiant_ecs::render::fill_lightmap(render_scene, scene, &bake.mesh, &bake.radiosity);
     }
 }

@@ -20,6 +20,8 @@
 
 pub mod app;
 pub mod bake;
+#[cfg(feature = "render")]
+pub mod render;
 pub mod scene;
 
 use app::{App, Plugin};
@@ -41,6 +43,11 @@ pub mod prelude {
     pub use crate::bake::{
         BakeControl, BakePhase, BakePlugin, BakeStatus, BakeSystems, BakeWorker, BakedLighting,
         RadiosityBake,
+    };
+    #[cfg(feature = "render")]
+    pub use crate::render::{
+        Bloom, DebugView, GaussianBlur, Gpu, LastFrame, RenderPlugin, RenderSettings, RenderState,
+        RenderSystems, Sobel, Ssao, Tonemapping,
     };
     pub use crate::scene::{
         Geometry, GlobalTransform, Material, PunctualLight, SceneCamera, ScenePlugin, Static,

@@ -1,0 +1,307 @@
+//! Extraction to the renderer (feature `render`): effect components on the camera, the baked
+//! light as a light map, and a frame rendered offscreen every update.
+//!
+//! Effects are components named after the feature, on the [`SceneCamera`] entity: insert
+//! [`Bloom`], [`Ssao`], [`Sobel`] or [`GaussianBlur`] to turn one on, remove it to turn it off;
+//! with none, their passes are culled and nothing is extracted for them. [`Tonemapping`] and
+//! [`DebugView`] fall back to their defaults.
+
+use std::sync::Arc;
+
+use bevy_ecs::prelude::*;
+use radiant_post::frame::{FrameRenderer, FrameSettings};
+use radiant_radiosity::{Mesh, Rgb};
+use radiant_render::capture::Image;
+use radiant_render::scene::RenderScene;
+use radiant_render::{GpuContext, RenderError};
+use radiant_scene::Scene;
+
+use crate::app::{App, Plugin, PostUpdate};
+use crate::bake::{BakeSystems, BakedLighting};
+use crate::scene::{SceneCamera, gather_scene};
+
+/// Bloom on the camera (see `radiant_post::bloom::Bloom` for the fields).
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct Bloom(pub radiant_post::bloom::Bloom);
+/// SSAO on the camera (see `radiant_render::ssao::Ssao`).
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct Ssao(pub radiant_render::ssao::Ssao);
+/// Sobel edges on the camera (see `radiant_post::sobel::Sobel`).
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct Sobel(pub radiant_post::sobel::Sobel);
+/// Gaussian blur on the camera (see `radiant_post::blur::GaussianBlur`).
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct GaussianBlur(pub radiant_post::blur::GaussianBlur);
+/// Exposure and operator (default when absent: ACES at 0 EV).
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct Tonemapping(pub radiant_post::tonemapping::Tonemapping);
+/// What the lighting pass shows (default when absent: the lit image).
+#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
+pub struct DebugView(pub radiant_render::lighting::DebugView);
+
+/// Renderer settings.
+#[derive(Resource, Clone, Copy, Debug, PartialEq)]
+pub struct RenderSettings {
+    /// Frame size in pixels (default: 512 × 512).
+    pub size: (u32, u32),
+    /// Light-map texels along a triangle's side; range 4..=256 (default: 32).
+    pub lightmap_cell: u32,
+    /// Light updates whose largest relative change is below this are not uploaded, unless the
+    /// bake converged (default: 0.002, under one 8-bit step).
+    pub visible_change: f64,
+    /// Read every frame back into [`LastFrame`] (default: false; tests and tools turn it on).
+    pub capture: bool,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            size: (512, 512),
+            lightmap_cell: 32,
+            visible_change: 0.002,
+            capture: false,
+        }
+    }
+}
+
+/// The GPU, created by [`RenderPlugin::finish`].
+#[derive(Resource)]
+pub struct Gpu(pub GpuContext);
+
+/// The renderer and what it last drew.
+#[derive(Resource, Default)]
+pub struct RenderState {
+    renderer: Option<FrameRenderer>,
+    scene: Option<Arc<Scene>>,
+    uploaded_generation: Option<u64>,
+    uploaded_light: Option<Arc<Vec<Rgb>>>,
+    target: Option<(u32, u32, radiant_render::wgpu::Texture)>,
+    /// Light maps uploaded so far.
+    pub uploads: u64,
+    /// Frames rendered.
+    pub frames: u64,
+    /// Settings of the last frame.
+    pub settings: Option<FrameSettings>,
+    /// The last error, if rendering failed.
+    pub error: Option<String>,
+}
+
+impl RenderState {
+    /// The compiled graph's report, once a frame was drawn.
+    pub fn graph(&self) -> Option<&radiant_render::graph::GraphReport> {
+        self.renderer.as_ref().and_then(|r| r.report())
+    }
+}
+
+/// The last frame read back (with [`RenderSettings::capture`]).
+#[derive(Resource, Default)]
+pub struct LastFrame {
+    /// Tone-mapped, sRGB-encoded.
+    pub ldr: Option<Image>,
+    /// Linear radiance before tone mapping.
+    pub hdr: Option<Image>,
+}
+
+/// The render systems.
+#[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct RenderSystems;
+
+/// Draws the world headless after the bake's systems. Needs a GPU adapter: without one,
+/// `finish` logs the install hint and frames are skipped (the bake still runs).
+pub struct RenderPlugin;
+
+impl Plugin for RenderPlugin {
+    fn build(&self, app: &mut App) {
+        app.init_resource::<RenderSettings>()
+            .init_resource::<RenderState>()
+            .init_resource::<LastFrame>()
+            .configure_sets(PostUpdate, RenderSystems.after(BakeSystems))
+            .add_systems(PostUpdate, render_frame.in_set(RenderSystems));
+    }
+
+    fn finish(&self, app: &mut App) {
+        if app.world.contains_resource::<Gpu>() {
+            return;
+        }
+        match GpuContext::headless() {
+            Ok(gpu) => {
+                app.insert_resource(Gpu(gpu));
+            }
+            Err(e) => tracing::error!("no frames will be rendered: {e}"),
+        }
+    }
+}
+
+/// Fills a light map made by `RenderScene::from_scene(scene, ..)` with the incident radiance
+/// `H = (B − E)/ρ` of the element under each texel, so that `albedo × H + E` reproduces `B`.
+pub fn fill_lightmap(rs: &mut RenderScene, scene: &Scene, mesh: &Mesh, radiosity: &[Rgb]) {
+    rs.fill_lightmap(|t| {
+        let Some(tri) = scene.triangles.get(t.triangle) else {
+            return [0.0; 3];
+        };
+        let surface = &scene.surfaces[tri.surface as usize];
+        let e = mesh.locate(t.triangle as u32, f64::from(t.u), f64::from(t.v));
+        let Some(b) = radiosity.get(e as usize) else {
+            return [0.0; 3];
+        };
+        [0, 1, 2].map(|c| {
+            let rho = surface.reflectance[c];
+            if rho > 1e-6 {
+                ((b[c] - surface.emission[c]) / rho).max(0.0) as f32
+            } else {
+                0.0
+            }
+        })
+    });
+}
+
+fn max_rel_change(a: &[Rgb], b: &[Rgb]) -> f64 {
+    if a.len() != b.len() {
+        return f64::INFINITY;
+    }
+    let peak = b
+        .iter()
+        .flatten()
+        .fold(0.0f64, |m, v| m.max(v.abs()))
+        .max(1e-12);
+    a.iter()
+        .flatten()
+        .zip(b.iter().flatten())
+        .map(|(x, y)| (x - y).abs() / peak)
+        .fold(0.0, f64::max)
+}
+
+/// The frame settings the camera's components ask for. Absent effects are `None`.
+pub fn extract_settings(world: &mut World) -> FrameSettings {
+    let mut q = world.query_filtered::<(
+        Option<&Bloom>,
+        Option<&Ssao>,
+        Option<&Sobel>,
+        Option<&GaussianBlur>,
+        Option<&Tonemapping>,
+        Option<&DebugView>,
+    ), With<SceneCamera>>();
+    let Some((bloom, ssao, sobel, blur, tm, view)) = q.iter(world).next() else {
+        return FrameSettings::MINIMAL;
+    };
+    FrameSettings {
+        tonemapping: tm.map(|t| t.0).unwrap_or_default(),
+        bloom: bloom.map(|b| b.0),
+        ssao: ssao.map(|s| s.0),
+        sobel: sobel.map(|s| s.0),
+        blur: blur.map(|b| b.0),
+        debug_view: view.map(|v| v.0).unwrap_or_default(),
+    }
+}
+
+fn build_scene(world: &mut World, settings: &RenderSettings) -> Result<RenderScene, RenderError> {
+    let scene = gather_scene(world);
+    let lit = world.resource::<BakedLighting>().clone();
+    let mut rs = RenderScene::from_scene(&scene, settings.lightmap_cell)?;
+    if let Some(mesh) = &lit.mesh
+        && mesh.roots.len() == scene.triangles.len()
+        && !lit.radiosity.is_empty()
+    {
+        fill_lightmap(&mut rs, &scene, mesh, &lit.radiosity);
+    }
+    world.resource_mut::<RenderState>().scene = Some(Arc::new(scene));
+    Ok(rs)
+}
+
+/// Uploads a new light map when the bake published a visibly different one (or the scene
+/// changed), then renders one frame offscreen. Exclusive: it gathers the scene.
+pub fn render_frame(world: &mut World) {
+    if !world.contains_resource::<Gpu>() {
+        return;
+    }
+    let settings = *world.resource::<RenderSettings>();
+    let frame_settings = extract_settings(world);
+    let (generation, light, converged) = {
+        let lit = world.resource::<BakedLighting>();
+        let converged =
+            world.resource::<crate::bake::BakeStatus>().phase == crate::bake::BakePhase::Converged;
+        (lit.generation, lit.radiosity.clone(), converged)
+    };
+    let gathered = gather_scene(world);
+    let result = world.resource_scope(|world, gpu: Mut<Gpu>| -> Result<(), RenderError> {
+        let state = world.resource::<RenderState>();
+        let scene_changed = state.scene.as_deref() != Some(&gathered);
+        let light_changed = state.uploaded_generation != Some(generation)
+            && (converged
+                || state
+                    .uploaded_light
+                    .as_ref()
+                    .is_none_or(|old| max_rel_change(&light, old) >= settings.visible_change));
+        let needs_upload = state.renderer.is_none() || scene_changed || light_changed;
+        if needs_upload {
+            if gathered.triangles.is_empty() {
+                return Ok(());
+            }
+            let rs = build_scene(world, &settings)?;
+            let mut state = world.resource_mut::<RenderState>();
+            match state.renderer.as_mut() {
+                Some(r) => r.set_scene(&gpu.0, &rs)?,
+                None => state.renderer = Some(FrameRenderer::new(&gpu.0, &rs)?),
+            }
+            state.uploaded_generation = Some(generation);
+            state.uploaded_light = Some(light.clone());
+            state.uploads += 1;
+        }
+        let (w, h) = settings.size;
+        let mut state = world.resource_mut::<RenderState>();
+        if settings.capture {
+            let Some(renderer) = state.renderer.as_mut() else {
+                return Ok(());
+            };
+            let capture = renderer.capture(&gpu.0, w, h, &frame_settings)?;
+            let mut last = world.resource_mut::<LastFrame>();
+            last.ldr = Some(capture.ldr);
+            last.hdr = Some(capture.hdr);
+        } else {
+            use radiant_render::wgpu;
+            let format = wgpu::TextureFormat::Rgba8UnormSrgb;
+            if state.target.as_ref().is_none_or(|t| (t.0, t.1) != (w, h)) {
+                let max = gpu.0.device.limits().max_texture_dimension_2d;
+                if w == 0 || h == 0 || w > max || h > max {
+                    return Err(RenderError::InvalidSize {
+                        width: w,
+                        height: h,
+                        max,
+                    });
+                }
+                let tex = gpu.0.device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some("ecs_frame_target"),
+                    size: wgpu::Extent3d {
+                        width: w,
+                        height: h,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+                    view_formats: &[],
+                });
+                state.target = Some((w, h, tex));
+            }
+            let state = &mut *state;
+            let (Some(renderer), Some((_, _, tex))) =
+                (state.renderer.as_mut(), state.target.as_ref())
+            else {
+                return Ok(());
+            };
+            let view = tex.create_view(&Default::default());
+            renderer.render(&gpu.0, &view, w, h, format, &frame_settings)?;
+        }
+        let mut state = world.resource_mut::<RenderState>();
+        state.frames += 1;
+        state.settings = Some(frame_settings);
+        state.error = None;
+        Ok(())
+    });
+    if let Err(e) = result {
+        tracing::error!("frame not rendered: {e}");
+        world.resource_mut::<RenderState>().error = Some(e.to_string());
+    }
+}
