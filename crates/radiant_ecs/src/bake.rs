@@ -21,7 +21,7 @@ use bevy_tasks::{AsyncComputeTaskPool, Task, TaskPoolBuilder, futures::check_rea
 use radiant_radiosity::bake::STALL_STEPS;
 use radiant_radiosity::metrics::{SurfaceMean, surface_means};
 use radiant_radiosity::{Bake, BakeParams, Mesh, Rgb};
-use radiant_scene::{Scene, Surface};
+use radiant_scene::{Light, Scene, Surface};
 
 use crate::app::{App, Plugin, PostUpdate};
 use crate::scene::{
@@ -184,6 +184,8 @@ pub struct SceneChanges {
     pub geometry: bool,
     /// Only materials of static surfaces changed.
     pub materials: bool,
+    /// Punctual lights were added, removed, moved or changed.
+    pub lights: bool,
 }
 
 /// Notes changes to static geometry, materials and lights (Bevy change detection).
@@ -212,9 +214,11 @@ pub fn detect_scene_changes(
     mut removed_lights: RemovedComponents<PunctualLight>,
     mut changes: ResMut<SceneChanges>,
 ) {
-    let removed = removed_static.read().count() + removed_lights.read().count() > 0;
-    if !geometry.is_empty() || !lights.is_empty() || removed {
+    if !geometry.is_empty() || removed_static.read().count() > 0 {
         changes.geometry = true;
+    }
+    if !lights.is_empty() || removed_lights.read().count() > 0 {
+        changes.lights = true;
     }
     if !materials.is_empty() {
         changes.materials = true;
@@ -224,7 +228,7 @@ pub fn detect_scene_changes(
 enum Control {
     Pause,
     Cancel,
-    Edit(Vec<Surface>, u64),
+    Edit(Vec<Surface>, Option<Vec<Light>>, u64),
 }
 
 enum Report {
@@ -259,7 +263,21 @@ enum Outcome {
 
 enum Start {
     Build(Arc<Scene>),
-    Continue(Box<Bake>, Option<Vec<Surface>>),
+    Continue(Box<Bake>, Option<Edit>),
+}
+
+/// A change that keeps the links: new materials, and new lights if they changed.
+struct Edit {
+    surfaces: Vec<Surface>,
+    lights: Option<Vec<Light>>,
+}
+
+fn apply(bake: &mut Bake, edit: &Edit) -> Result<(), radiant_radiosity::BakeError> {
+    bake.edit_surfaces(&edit.surfaces)?;
+    if let Some(l) = &edit.lights {
+        bake.edit_lights(l)?;
+    }
+    Ok(())
 }
 
 /// The worker's handles, and what waits to be done.
@@ -270,7 +288,7 @@ pub struct BakeWorker {
     from_worker: Option<Mutex<mpsc::Receiver<Report>>>,
     idle: Option<(Box<Bake>, u64)>,
     rebuild: Option<Arc<Scene>>,
-    edit: Option<Vec<Surface>>,
+    edit: Option<Edit>,
     /// Increments on every scene change; publications carry the epoch they match.
     epoch: u64,
     contraction: f64,
@@ -321,8 +339,8 @@ fn work(
             }
         }
         Start::Continue(mut b, edit) => {
-            if let Some(s) = edit {
-                match b.edit_surfaces(&s) {
+            if let Some(edit) = edit {
+                match apply(&mut b, &edit) {
                     Ok(()) => send(Report::Edited),
                     Err(radiant_radiosity::BakeError::NeedsRebuild) => {
                         return Outcome::NeedsRebuild;
@@ -341,17 +359,19 @@ fn work(
             match c {
                 Control::Cancel => return Outcome::Cancelled,
                 Control::Pause => return Outcome::Paused(bake, epoch),
-                Control::Edit(s, e) => match bake.edit_surfaces(&s) {
-                    Ok(()) => {
-                        epoch = e;
-                        (best, since_best) = (f64::INFINITY, 0);
-                        send(Report::Edited);
+                Control::Edit(surfaces, lights, e) => {
+                    match apply(&mut bake, &Edit { surfaces, lights }) {
+                        Ok(()) => {
+                            epoch = e;
+                            (best, since_best) = (f64::INFINITY, 0);
+                            send(Report::Edited);
+                        }
+                        Err(radiant_radiosity::BakeError::NeedsRebuild) => {
+                            return Outcome::NeedsRebuild;
+                        }
+                        Err(err) => return Outcome::Failed(err.to_string()),
                     }
-                    Err(radiant_radiosity::BakeError::NeedsRebuild) => {
-                        return Outcome::NeedsRebuild;
-                    }
-                    Err(err) => return Outcome::Failed(err.to_string()),
-                },
+                }
             }
         }
         // One sweep (or one shot) per step: the same sequence whatever the timing.
@@ -660,8 +680,9 @@ pub fn drive_bake(world: &mut World) {
             let _ = tx.send(Control::Cancel);
         }
         world.resource_mut::<BakeStatus>().stale = true;
-    } else if changes.materials {
+    } else if changes.materials || changes.lights {
         let scene = gather_scene(world);
+        let lights = changes.lights.then(|| scene.lights.clone());
         if !scene.has_emitters() {
             stop(world);
             world.resource_mut::<BakeStatus>().phase = BakePhase::NoEmitters;
@@ -675,9 +696,14 @@ pub fn drive_bake(world: &mut World) {
             // No bake to edit (none yet, or the scene had no emitters): build one.
             w.rebuild = Some(Arc::new(scene));
         } else if let Some(tx) = &w.to_worker {
-            let _ = tx.send(Control::Edit(scene.surfaces, epoch));
+            let _ = tx.send(Control::Edit(scene.surfaces, lights, epoch));
         } else {
-            w.edit = Some(scene.surfaces);
+            // Merge with an edit still waiting (its lights stay if these did not change).
+            let lights = lights.or_else(|| w.edit.take().and_then(|e| e.lights));
+            w.edit = Some(Edit {
+                surfaces: scene.surfaces,
+                lights,
+            });
         }
         world.resource_mut::<BakeStatus>().stale = true;
     }

@@ -229,3 +229,40 @@ fn pause_resume_and_cancel() {
     assert_eq!(lit.generation, published);
     assert!(!lit.radiosity.is_empty());
 }
+
+#[test]
+fn light_edits_keep_the_links() {
+    let mut app = cornell_app(None);
+    app.world.spawn((
+        Name::new("lamp"),
+        PunctualLight(radiant_scene::Light {
+            name: "lamp".into(),
+            kind: radiant_scene::LightKind::Point,
+            position: glam::DVec3::new(0.25, 0.3, 0.2),
+            direction: glam::DVec3::NEG_Y,
+            color: [1.0, 0.9, 0.8],
+            intensity: 0.05,
+            range: None,
+        }),
+    ));
+    converge(&mut app);
+    let mut q = app.world.query::<&mut PunctualLight>();
+    for mut l in q.iter_mut(&mut app.world) {
+        l.0.intensity = 0.2;
+    }
+    app.update();
+    converge(&mut app);
+    let mut q = app.world.query::<(&PunctualLight, &mut Transform)>();
+    for (_, mut t) in q.iter_mut(&mut app.world) {
+        t.translation.x -= 0.1;
+    }
+    app.update();
+    converge(&mut app);
+    let status = app.world.resource::<BakeStatus>().clone();
+    assert_eq!((status.builds, status.edits), (1, 2), "{status:?}");
+    let scene = gather_scene(&mut app.world);
+    assert_eq!(scene.lights.len(), 1);
+    assert!((scene.lights[0].position.x - 0.15).abs() < 1e-12);
+    let want = fresh(&mut app);
+    assert_surfaces_close(&app, &want, 0.02);
+}

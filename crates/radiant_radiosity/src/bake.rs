@@ -3,7 +3,7 @@
 
 use std::time::{Duration, Instant};
 
-use radiant_scene::{Scene, Surface};
+use radiant_scene::{Light, Scene, Surface};
 use radiant_visibility::{Bvh, Visibility};
 
 use crate::form_factors::{self, FfContext, FormFactorKind, FormFactorParams};
@@ -384,6 +384,35 @@ impl Bake {
         self.solver.warm_start(&self.system, &b);
         self.last = None;
         Ok(())
+    }
+
+    /// Replaces the punctual lights: their direct light is computed again (shadow rays on the
+    /// same geometry), the links are kept, and the solve warm-starts as for
+    /// [`Bake::edit_surfaces`]. Lights must be finite, with non-negative intensity.
+    pub fn edit_lights(&mut self, lights: &[Light]) -> Result<(), BakeError> {
+        for l in lights {
+            let finite = l.position.is_finite()
+                && l.direction.is_finite()
+                && l.intensity.is_finite()
+                && l.color.iter().all(|c| c.is_finite());
+            if !finite || l.intensity < 0.0 || l.color.iter().any(|&c| c < 0.0) {
+                return Err(BakeError::InvalidParameter(format!(
+                    "light '{}' has a non-finite or negative value",
+                    l.name
+                )));
+            }
+        }
+        let old = self.direct.take();
+        if !lights.is_empty() {
+            let bvh = Bvh::new(&self.mesh.root_triangles_f32());
+            self.direct = Some(lights::direct_irradiance(&self.mesh, lights, &bvh));
+        }
+        let surfaces = self.surfaces.clone();
+        let result = self.edit_surfaces(&surfaces);
+        if result.is_err() {
+            self.direct = old;
+        }
+        result
     }
 
     /// Seconds since the bake started.

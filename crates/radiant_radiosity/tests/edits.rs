@@ -132,6 +132,19 @@ fn edits_that_need_new_links_or_break_materials_are_typed_errors() {
         bake.edit_surfaces(&scene.surfaces[1..]),
         Err(BakeError::InvalidParameter(_))
     ));
+    let bad_light = radiant_scene::Light {
+        name: "bad".into(),
+        kind: radiant_scene::LightKind::Point,
+        position: glam::DVec3::new(f64::NAN, 0.0, 0.0),
+        direction: glam::DVec3::NEG_Y,
+        color: [1.0; 3],
+        intensity: 1.0,
+        range: None,
+    };
+    assert!(matches!(
+        bake.edit_lights(&[bad_light]),
+        Err(BakeError::InvalidParameter(_))
+    ));
     // Removing every emitter is fine: the answer becomes zero.
     bake.edit_surfaces(&dark.surfaces).expect("edit");
     bake.step(std::time::Duration::from_millis(50))
