@@ -6,7 +6,7 @@ use std::time::Instant;
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
 use radiant::radiosity::metrics::{self, CORNELL_BOX_REFERENCE};
-use radiant::radiosity::{Bake, BakeEvent, lightmap};
+use radiant::radiosity::{BakeEvent, lightmap};
 use serde_json::json;
 
 use crate::output::{self, ensure_dir, write_atomic};
@@ -138,10 +138,15 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     ensure_dir(&args.out)?;
 
     let pb = progress_bar(1, "form factors");
-    let bake = Bake::with_progress(&scene, &params, &|done, total| {
-        pb.set_length(total as u64);
-        pb.set_position(done as u64);
-    })?;
+    let bake = crate::start_bake(
+        &scene,
+        &params,
+        args.checkpoint.as_deref(),
+        &|done, total| {
+            pb.set_length(total as u64);
+            pb.set_position(done as u64);
+        },
+    )?;
     pb.set_message("solving");
     pb.set_length(1000);
     pb.set_position(0);
@@ -163,6 +168,9 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         );
     })?;
     pb.finish_and_clear();
+    if let Some(path) = &args.checkpoint {
+        result.write_checkpoint(path)?;
+    }
 
     let error = match &reference {
         Some((name, rows)) => Some((

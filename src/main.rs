@@ -113,6 +113,10 @@ pub(crate) struct BakeArgs {
     /// Spectral materials side file (JSON, see assets/cornell_box_spectra.json) for --spectral.
     #[arg(long)]
     pub(crate) spectra: Option<PathBuf>,
+    /// Checkpoint file: resume from it when it matches the scene (no form factors computed),
+    /// and write it (atomically) when the bake ends.
+    #[arg(long)]
+    pub(crate) checkpoint: Option<PathBuf>,
     /// Width of the light-map atlas in texels (16 to 16384).
     #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(16..=16384))]
     pub(crate) lightmap_width: u32,
@@ -201,6 +205,27 @@ impl SolveArgs {
         }
         Ok(())
     }
+}
+
+/// Starts a bake, resuming from `checkpoint` when it exists and fits the scene.
+pub(crate) fn start_bake(
+    scene: &radiant::scene::Scene,
+    params: &BakeParams,
+    checkpoint: Option<&std::path::Path>,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> anyhow::Result<radiant::radiosity::Bake> {
+    if let Some(path) = checkpoint.filter(|p| p.exists()) {
+        match radiant::radiosity::Bake::resume(scene, params, path) {
+            Ok(b) => {
+                println!("resumed from {} (no form factors computed)", path.display());
+                return Ok(b);
+            }
+            Err(e) => println!("not resuming: {e}; baking from scratch"),
+        }
+    }
+    Ok(radiant::radiosity::Bake::with_progress(
+        scene, params, progress,
+    )?)
 }
 
 /// Seconds as a `Duration`, with a clear error instead of a panic for absurd values.

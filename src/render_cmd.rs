@@ -8,7 +8,7 @@ use anyhow::Context;
 use clap::Args;
 use radiant::color::Tonemap;
 use radiant::post::frame::{FrameRenderer, FrameSettings};
-use radiant::radiosity::{Bake, BakeEvent};
+use radiant::radiosity::BakeEvent;
 use radiant::render::GpuContext;
 use radiant::render::capture::{write_exr, write_png};
 use radiant::render::lighting::DebugView;
@@ -56,6 +56,10 @@ pub(crate) struct RenderArgs {
     /// Form factors for the bake.
     #[arg(long, default_value = "analytic")]
     pub(crate) form_factors: String,
+    /// Checkpoint file: load the bake from it when it matches the scene, and write it after
+    /// baking.
+    #[arg(long)]
+    pub(crate) checkpoint: Option<PathBuf>,
     /// Also time each pass over this many frames (median), into render.json.
     #[arg(long, default_value_t = 0)]
     pub(crate) timings: usize,
@@ -127,15 +131,23 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     // No emitters: nothing to bake, and nothing is allocated for it.
     let bake = if scene.has_emitters() {
         let pb = progress_bar(1, "form factors");
-        let bake = Bake::with_progress(&scene, &params, &|done, total| {
-            pb.set_length(total as u64);
-            pb.set_position(done as u64);
-        })?;
+        let bake = crate::start_bake(
+            &scene,
+            &params,
+            args.checkpoint.as_deref(),
+            &|done, total| {
+                pb.set_length(total as u64);
+                pb.set_position(done as u64);
+            },
+        )?;
         pb.set_message("solving");
         let result = bake.run_to_end(&mut |BakeEvent::Solve(p, _)| {
             pb.set_message(format!("solving, residual {:.1e}", p.residual));
         })?;
         pb.finish_and_clear();
+        if let Some(path) = &args.checkpoint {
+            result.write_checkpoint(path)?;
+        }
         Some(result)
     } else {
         println!("{source}: no emitters, so no bake; the frame shows punctual lights and emission");

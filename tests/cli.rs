@@ -289,3 +289,58 @@ fn spectral_bake_compares_with_rgb() {
     assert!(String::from_utf8_lossy(&st.stderr).contains("--spectra"));
     let _ = std::fs::remove_dir_all(&out);
 }
+
+#[test]
+fn a_checkpoint_lets_the_next_bake_skip_form_factors() {
+    let out = tmp("ckpt");
+    let ckpt = std::env::temp_dir().join(format!("radiant-cli-{}.ckpt", std::process::id()));
+    let _ = std::fs::remove_file(&ckpt);
+    let bake = || {
+        radiant()
+            .args(["bake", "--builtin", "cornell-box", "--patch-size", "0.3"])
+            .arg("--checkpoint")
+            .arg(&ckpt)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .expect("runs")
+    };
+    let first = bake();
+    assert!(
+        first.status.success(),
+        "{}",
+        String::from_utf8_lossy(&first.stderr)
+    );
+    assert!(!String::from_utf8_lossy(&first.stdout).contains("resumed"));
+    assert!(ckpt.is_file());
+    let surfaces_1 = std::fs::read_to_string(out.join("surfaces.csv")).expect("csv");
+    let second = bake();
+    assert!(
+        second.status.success(),
+        "{}",
+        String::from_utf8_lossy(&second.stderr)
+    );
+    assert!(String::from_utf8_lossy(&second.stdout).contains("resumed from"));
+    let surfaces_2 = std::fs::read_to_string(out.join("surfaces.csv")).expect("csv");
+    let parse = |s: &str| -> Vec<f64> {
+        s.lines()
+            .skip(1)
+            .flat_map(|l| {
+                l.split(',')
+                    .skip(2)
+                    .map(|v| v.parse::<f64>().expect("number"))
+                    .collect::<Vec<_>>()
+            })
+            .collect()
+    };
+    for (a, b) in parse(&surfaces_1).iter().zip(parse(&surfaces_2)) {
+        assert!((a - b).abs() <= 1e-3 * a.abs().max(1e-3), "{a} vs {b}");
+    }
+    // A checkpoint of another scene is not used.
+    std::fs::write(&ckpt, b"garbage").expect("write");
+    let third = bake();
+    assert!(third.status.success());
+    assert!(String::from_utf8_lossy(&third.stdout).contains("not resuming"));
+    let _ = std::fs::remove_dir_all(&out);
+    let _ = std::fs::remove_file(&ckpt);
+}

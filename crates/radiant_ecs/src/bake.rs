@@ -39,6 +39,10 @@ pub struct RadiosityBake {
     /// Worker threads for the bake's parallel parts, `None` for all cores (default: `None`).
     /// Results are the same for any count.
     pub threads: Option<usize>,
+    /// A checkpoint file: a bake of the same geometry resumes from it without computing form
+    /// factors, and it is rewritten (atomically) after each build, on convergence and on pause
+    /// (default: none).
+    pub checkpoint: Option<std::path::PathBuf>,
 }
 
 impl Default for RadiosityBake {
@@ -47,6 +51,7 @@ impl Default for RadiosityBake {
             params: BakeParams::default(),
             publish_interval: Duration::from_millis(100),
             threads: None,
+            checkpoint: None,
         }
     }
 }
@@ -101,6 +106,8 @@ pub struct BakeStatus {
     pub elements: usize,
     /// Links of the current bake.
     pub links: usize,
+    /// Whether the current bake resumed from the checkpoint (no form factors computed).
+    pub resumed: bool,
     /// The error, when `phase` is `Failed`.
     pub error: Option<String>,
     /// A warning (the solver stopped converging), if any.
@@ -237,6 +244,7 @@ enum Report {
         mesh: Arc<Mesh>,
         links: usize,
         contraction: f64,
+        resumed: bool,
     },
     Edited,
     Step {
@@ -310,34 +318,60 @@ impl BakeWorker {
     }
 }
 
-fn work(
-    start: Start,
+/// What a worker needs besides its start.
+struct WorkerSetup {
     params: BakeParams,
     publish_interval: Duration,
-    mut epoch: u64,
+    checkpoint: Option<std::path::PathBuf>,
+    epoch: u64,
+}
+
+fn save(bake: &Bake, setup: &WorkerSetup, tx: &mpsc::Sender<Report>) {
+    if let Some(path) = &setup.checkpoint
+        && let Err(e) = bake.write_checkpoint(path)
+    {
+        let _ = tx.send(Report::Warning(e.to_string()));
+    }
+}
+
+fn build(scene: &Scene, setup: &WorkerSetup, tx: &mpsc::Sender<Report>) -> Result<Bake, String> {
+    if let Some(path) = setup.checkpoint.as_deref().filter(|p| p.exists()) {
+        match Bake::resume(scene, &setup.params, path) {
+            Ok(b) => return Ok(b),
+            Err(e) => tracing::info!("not resuming: {e}"),
+        }
+    }
+    let progress = |d: usize, t: usize| {
+        let _ = tx.send(Report::Building(d, t));
+    };
+    let b = Bake::with_progress(scene, &setup.params, &progress).map_err(|e| e.to_string())?;
+    save(&b, setup, tx);
+    Ok(b)
+}
+
+fn work(
+    start: Start,
+    setup: WorkerSetup,
     rx: mpsc::Receiver<Control>,
     tx: mpsc::Sender<Report>,
 ) -> Outcome {
     let send = |r: Report| {
         let _ = tx.send(r);
     };
+    let (publish_interval, mut epoch) = (setup.publish_interval, setup.epoch);
     let mut bake = match start {
-        Start::Build(scene) => {
-            let progress = |d: usize, t: usize| {
-                let _ = tx.send(Report::Building(d, t));
-            };
-            match Bake::with_progress(&scene, &params, &progress) {
-                Ok(b) => {
-                    send(Report::Built {
-                        mesh: Arc::new(b.mesh.clone()),
-                        links: b.system.links.len(),
-                        contraction: b.system.contraction(),
-                    });
-                    Box::new(b)
-                }
-                Err(e) => return Outcome::Failed(e.to_string()),
+        Start::Build(scene) => match build(&scene, &setup, &tx) {
+            Ok(b) => {
+                send(Report::Built {
+                    mesh: Arc::new(b.mesh.clone()),
+                    links: b.system.links.len(),
+                    contraction: b.system.contraction(),
+                    resumed: b.is_resumed(),
+                });
+                Box::new(b)
             }
-        }
+            Err(e) => return Outcome::Failed(e),
+        },
         Start::Continue(mut b, edit) => {
             if let Some(edit) = edit {
                 match apply(&mut b, &edit) {
@@ -358,7 +392,10 @@ fn work(
         while let Ok(c) = rx.try_recv() {
             match c {
                 Control::Cancel => return Outcome::Cancelled,
-                Control::Pause => return Outcome::Paused(bake, epoch),
+                Control::Pause => {
+                    save(&bake, &setup, &tx);
+                    return Outcome::Paused(bake, epoch);
+                }
                 Control::Edit(surfaces, lights, e) => {
                     match apply(&mut bake, &Edit { surfaces, lights }) {
                         Ok(()) => {
@@ -397,6 +434,10 @@ fn work(
             )));
         }
         let done = p.converged || stalled;
+        if done {
+            // Before the final publication, so whoever sees "converged" finds the checkpoint.
+            save(&bake, &setup, &tx);
+        }
         if done || last_publish.is_none_or(|t| t.elapsed() >= publish_interval) {
             let radiosity = bake.radiosity();
             let surfaces = surface_means(&bake.surfaces, &bake.mesh, &radiosity);
@@ -440,9 +481,13 @@ fn thread_pool(worker: &mut BakeWorker, threads: usize) -> Option<Arc<rayon::Thr
 fn spawn(worker: &mut BakeWorker, settings: &RadiosityBake, start: Start) {
     let (to_worker, rx) = mpsc::channel();
     let (tx, from_worker) = mpsc::channel();
-    let params = settings.params;
-    let interval = settings.publish_interval;
-    let epoch = worker.epoch;
+    let setup = WorkerSetup {
+        params: settings.params,
+        publish_interval: settings.publish_interval,
+        checkpoint: settings.checkpoint.clone(),
+        epoch: worker.epoch,
+    };
+    let tolerance = settings.params.solver_params.tolerance;
     let pool = settings.threads.and_then(|n| thread_pool(worker, n.max(1)));
     // Bevy's async compute pool, if an app set it up; else a small one (the bake's parallel
     // loops run on rayon, not here).
@@ -454,14 +499,14 @@ fn spawn(worker: &mut BakeWorker, settings: &RadiosityBake, start: Start) {
     });
     let task = task_pool.spawn(async move {
         match pool {
-            Some(p) => p.install(move || work(start, params, interval, epoch, rx, tx)),
-            None => work(start, params, interval, epoch, rx, tx),
+            Some(p) => p.install(move || work(start, setup, rx, tx)),
+            None => work(start, setup, rx, tx),
         }
     });
     worker.task = Some(task);
     worker.to_worker = Some(to_worker);
     worker.from_worker = Some(Mutex::new(from_worker));
-    worker.tolerance = params.solver_params.tolerance;
+    worker.tolerance = tolerance;
 }
 
 fn drain(world: &mut World) {
@@ -486,6 +531,7 @@ fn drain(world: &mut World) {
                 mesh,
                 links,
                 contraction,
+                resumed,
             } => {
                 let elements = mesh.element_count();
                 let mut w = world.resource_mut::<BakeWorker>();
@@ -500,6 +546,7 @@ fn drain(world: &mut World) {
                 s.history.clear();
                 s.iterations = 0;
                 s.builds += 1;
+                s.resumed = resumed;
                 s.warning = None;
             }
             Report::Edited => {

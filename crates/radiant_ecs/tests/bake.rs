@@ -266,3 +266,38 @@ fn light_edits_keep_the_links() {
     let want = fresh(&mut app);
     assert_surfaces_close(&app, &want, 0.02);
 }
+
+#[test]
+fn a_bake_resumes_from_its_checkpoint_after_a_restart() {
+    let dir = std::env::temp_dir().join(format!("radiant-ecs-ckpt-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let path = dir.join("cornell.ckpt");
+    let with_checkpoint = |app: &mut App| {
+        app.world.resource_mut::<RadiosityBake>().checkpoint = Some(path.clone());
+    };
+    let mut first = cornell_app(None);
+    with_checkpoint(&mut first);
+    converge(&mut first);
+    assert!(!first.world.resource::<BakeStatus>().resumed);
+    assert!(path.is_file(), "no checkpoint written");
+    let light = first.world.resource::<BakedLighting>().radiosity.clone();
+    drop(first);
+
+    // "Restart": a new world, the same scene and checkpoint.
+    let mut second = cornell_app(None);
+    with_checkpoint(&mut second);
+    converge(&mut second);
+    let status = second.world.resource::<BakeStatus>().clone();
+    assert!(status.resumed, "{status:?}");
+    assert!(
+        status.iterations <= 2,
+        "{} sweeps after resuming",
+        status.iterations
+    );
+    let again = second.world.resource::<BakedLighting>().radiosity.clone();
+    let peak = light.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    for (a, b) in light.iter().flatten().zip(again.iter().flatten()) {
+        assert!((a - b).abs() <= 2e-6 * peak);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

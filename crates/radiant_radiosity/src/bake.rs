@@ -133,6 +133,22 @@ pub struct BakeResult {
     pub surfaces: Vec<SurfaceMean>,
     /// The report.
     pub report: BakeReport,
+    fingerprint: u64,
+    dead: Vec<bool>,
+}
+
+impl BakeResult {
+    /// Writes the links and the solution to `path` (see [`Bake::write_checkpoint`]).
+    pub fn write_checkpoint(&self, path: &std::path::Path) -> Result<(), BakeError> {
+        crate::checkpoint::write(
+            path,
+            self.fingerprint,
+            self.mesh.nodes.len(),
+            &self.system.links,
+            &self.dead,
+            &self.radiosity,
+        )
+    }
 }
 
 /// A bake in progress.
@@ -150,6 +166,12 @@ pub struct Bake {
     has_emitters: bool,
     /// Per element: irradiance from the punctual lights (shadowed), for material edits.
     direct: Option<Vec<Rgb>>,
+    /// Elements inside closed geometry.
+    dead: Vec<bool>,
+    /// Fingerprint of geometry, lights and link parameters (for checkpoints).
+    fingerprint: u64,
+    /// Whether this bake was resumed from a checkpoint.
+    resumed: bool,
     solver: Box<dyn Solver>,
     started: Instant,
     solving: Duration,
@@ -203,6 +225,45 @@ impl Bake {
         params: &BakeParams,
         progress: &(dyn Fn(usize, usize) + Sync),
     ) -> Result<Bake, BakeError> {
+        Self::build(scene, params, progress, None)
+    }
+
+    /// Resumes from a checkpoint written by [`Bake::write_checkpoint`] for the same geometry,
+    /// lights and link parameters: no form factors are computed, and the solve continues from
+    /// the saved radiosity (with the scene's current materials, as an edit would). A checkpoint
+    /// for other geometry, or a damaged one, is a [`BakeError::Checkpoint`].
+    pub fn resume(
+        scene: &Scene,
+        params: &BakeParams,
+        path: &std::path::Path,
+    ) -> Result<Bake, BakeError> {
+        let saved = crate::checkpoint::read(path)?;
+        Self::build(scene, params, &|_, _| {}, Some(saved))
+    }
+
+    /// Writes the links and the current solution to `path`, atomically.
+    pub fn write_checkpoint(&self, path: &std::path::Path) -> Result<(), BakeError> {
+        crate::checkpoint::write(
+            path,
+            self.fingerprint,
+            self.mesh.nodes.len(),
+            &self.system.links,
+            &self.dead,
+            &self.radiosity(),
+        )
+    }
+
+    /// Whether this bake came from a checkpoint.
+    pub fn is_resumed(&self) -> bool {
+        self.resumed
+    }
+
+    fn build(
+        scene: &Scene,
+        params: &BakeParams,
+        progress: &(dyn Fn(usize, usize) + Sync),
+        saved: Option<crate::checkpoint::Saved>,
+    ) -> Result<Bake, BakeError> {
         let started = Instant::now();
         validate(scene)?;
         let p = &params.solver_params;
@@ -228,7 +289,22 @@ impl Bake {
             *slot = t.elapsed().as_secs_f64();
             t = Instant::now();
         };
+        let fingerprint = crate::checkpoint::fingerprint(scene, params);
+        if let Some(sv) = &saved
+            && sv.fingerprint != fingerprint
+        {
+            return Err(BakeError::Checkpoint(
+                "it was written for other geometry, lights or bake parameters".into(),
+            ));
+        }
         let mesh = Mesh::new(scene, &params.mesh)?;
+        if let Some(sv) = &saved
+            && (sv.dead.len() != mesh.element_count() || sv.nodes != mesh.nodes.len())
+        {
+            return Err(BakeError::Checkpoint(
+                "its element hierarchy differs from this scene's".into(),
+            ));
+        }
         if params.solver == SolverKind::Direct
             && mesh.element_count() > params.solver_params.max_direct
         {
@@ -264,16 +340,80 @@ impl Bake {
 
         let mut warnings = scene.warnings();
         let has_emitters = source.iter().any(|s| s.iter().any(|&v| v > 0.0));
-        let dead = if has_emitters {
-            enclosed_elements(&mesh, &bvh, params.ff.seed)
-        } else {
-            vec![false; n]
+        let (saved_links, saved_b) = match saved {
+            Some(sv) => (Some((sv.links, sv.dead)), Some(sv.radiosity)),
+            None => (None, None),
         };
-        let links = if has_emitters {
-            let (bhat, amb) = estimates(&mesh, &rho, &source);
+        let resumed = saved_links.is_some();
+        let (links, dead) = if let Some((links, dead)) = saved_links {
+            (links, dead)
+        } else {
+            let dead = if has_emitters {
+                enclosed_elements(&mesh, &bvh, params.ff.seed)
+            } else {
+                vec![false; n]
+            };
+            (
+                Self::links(
+                    &mesh,
+                    &bvh,
+                    params,
+                    &rho,
+                    &source,
+                    has_emitters,
+                    progress,
+                    &mut warnings,
+                ),
+                dead,
+            )
+        };
+        lap(&mut times.form_factors);
+        let dead_count = dead.iter().filter(|&&d| d).count();
+        if dead_count > 0 {
+            tracing::debug!("{dead_count} elements lie inside closed geometry");
+        }
+        let system = System::new(&mesh, rho, source, links, &dead);
+        let mut solver = new_solver(params.solver, &system, params.solver_params);
+        if let Some(b) = &saved_b {
+            solver.warm_start(&system, b);
+        }
+        Ok(Bake {
+            mesh,
+            system,
+            params: *params,
+            surfaces: scene.surfaces.clone(),
+            times,
+            warnings,
+            has_emitters,
+            direct,
+            dead,
+            fingerprint,
+            resumed,
+            solver,
+            started,
+            solving: Duration::ZERO,
+            timeline: Vec::new(),
+            last: None,
+        })
+    }
+
+    #[expect(clippy::too_many_arguments, reason = "the inputs of the link build")]
+    fn links(
+        mesh: &Mesh,
+        bvh: &Bvh,
+        params: &BakeParams,
+        rho: &[Rgb],
+        source: &[Rgb],
+        has_emitters: bool,
+        progress: &(dyn Fn(usize, usize) + Sync),
+        warnings: &mut Vec<String>,
+    ) -> links::Links {
+        let n = mesh.element_count();
+        if has_emitters {
+            let (bhat, amb) = estimates(mesh, rho, source);
             let ctx = FfContext {
-                mesh: &mesh,
-                vis: &bvh,
+                mesh,
+                vis: bvh,
                 params: params.ff,
             };
             let method = form_factors::method(params.form_factors);
@@ -291,29 +431,7 @@ impl Bake {
                 row: vec![0; n + 1],
                 ..Default::default()
             }
-        };
-        lap(&mut times.form_factors);
-        let dead_count = dead.iter().filter(|&&d| d).count();
-        if dead_count > 0 {
-            tracing::debug!("{dead_count} elements lie inside closed geometry");
         }
-        let system = System::new(&mesh, rho, source, links, &dead);
-        let solver = new_solver(params.solver, &system, params.solver_params);
-        Ok(Bake {
-            mesh,
-            system,
-            params: *params,
-            surfaces: scene.surfaces.clone(),
-            times,
-            warnings,
-            has_emitters,
-            direct,
-            solver,
-            started,
-            solving: Duration::ZERO,
-            timeline: Vec::new(),
-            last: None,
-        })
     }
 
     /// Runs the solver for about `budget` and records a timeline point.
@@ -506,6 +624,8 @@ impl Bake {
             radiosity,
             surfaces,
             report,
+            fingerprint: self.fingerprint,
+            dead: self.dead,
         }
     }
 }

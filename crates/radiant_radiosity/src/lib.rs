@@ -21,6 +21,7 @@
 )]
 
 pub mod bake;
+pub mod checkpoint;
 pub mod form_factors;
 pub mod lightmap;
 pub mod lights;
@@ -84,6 +85,9 @@ pub enum BakeError {
     /// A reference file could not be used.
     #[error("reference: {0}")]
     Reference(String),
+    /// A checkpoint could not be written, read, or does not fit this scene.
+    #[error("checkpoint: {0}")]
+    Checkpoint(String),
 }
 
 #[cfg(test)]

@@ -151,3 +151,70 @@ fn edits_that_need_new_links_or_break_materials_are_typed_errors() {
         .expect("step");
     assert!(bake.radiosity().iter().flatten().all(|&v| v == 0.0));
 }
+
+#[test]
+fn a_checkpoint_resumes_without_form_factors_and_refuses_other_scenes() {
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    let p = params(SolverKind::GaussSeidel);
+    let dir = std::env::temp_dir().join(format!("radiant-ckpt-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let path = dir.join("bake.ckpt");
+    let mut bake = Bake::new(&scene, &p).expect("bake");
+    let iterations = solve(&mut bake);
+    assert!(iterations > 3);
+    bake.write_checkpoint(&path).expect("write");
+    let t = std::time::Instant::now();
+    let mut resumed = Bake::resume(&scene, &p, &path).expect("resume");
+    let resume_s = t.elapsed().as_secs_f64();
+    assert!(resumed.is_resumed());
+    assert_eq!(resumed.system.links.len(), bake.system.links.len());
+    assert!(
+        resumed.report().times.form_factors < 0.5 * bake.report().times.form_factors,
+        "resuming computed form factors again"
+    );
+    // Already converged: the first step confirms it.
+    let p1 = resumed.step(std::time::Duration::ZERO).expect("step");
+    assert!(p1.converged, "resumed bake not converged: {p1:?}");
+    let (a, b) = (bake.radiosity(), resumed.radiosity());
+    let peak = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    let worst = a
+        .iter()
+        .flatten()
+        .zip(b.iter().flatten())
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max);
+    assert!(worst <= 2e-6 * peak, "resumed differs by {worst}");
+    eprintln!("resume took {resume_s:.3} s");
+
+    // Other geometry: refused.
+    let mut moved = scene.clone();
+    moved.triangles[0].vertices[0].x += 0.01;
+    assert!(matches!(
+        Bake::resume(&moved, &p, &path),
+        Err(BakeError::Checkpoint(_))
+    ));
+    // Other colours: resumed, as an edit.
+    let recoloured = edited(&scene, false);
+    assert!(Bake::resume(&recoloured, &p, &path).is_ok());
+    // Damaged or truncated files: typed errors, never a panic.
+    let bytes = std::fs::read(&path).expect("read");
+    let mut flipped = bytes.clone();
+    let mid = flipped.len() / 2;
+    flipped[mid] ^= 0x40;
+    for (name, data) in [
+        ("flipped", flipped),
+        ("truncated", bytes[..bytes.len() / 3].to_vec()),
+        ("empty", Vec::new()),
+    ] {
+        let bad = dir.join(name);
+        std::fs::write(&bad, data).expect("write");
+        assert!(
+            matches!(
+                Bake::resume(&scene, &p, &bad),
+                Err(BakeError::Checkpoint(_))
+            ),
+            "{name}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
