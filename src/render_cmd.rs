@@ -15,6 +15,11 @@ use radiant::render::lighting::DebugView;
 use serde_json::json;
 
 use crate::bake_cmd::progress_bar;
+
+/// Mitsuba 3 path-traced radiance of the builtin Cornell box from its camera, 128×128, 16 384
+/// spp (tools/make_cornell_render_reference.py).
+const CORNELL_RENDER_REFERENCE: &[u8] =
+    include_bytes!("../assets/reference/cornell_box_mitsuba_128.exr");
 use crate::output::{ensure_dir, write_atomic};
 use crate::{SceneArgs, SolveArgs, load_scene, parse_ff, parse_solver};
 
@@ -60,6 +65,10 @@ pub(crate) struct RenderArgs {
     /// baking.
     #[arg(long)]
     pub(crate) checkpoint: Option<PathBuf>,
+    /// A linear path-traced image of the scene from the same camera (EXR) to report the
+    /// frame's error against (the builtin Cornell box has one: Mitsuba 3, 128×128).
+    #[arg(long)]
+    pub(crate) reference_image: Option<PathBuf>,
     /// Also time each pass over this many frames (median), into render.json.
     #[arg(long, default_value_t = 0)]
     pub(crate) timings: usize,
@@ -179,6 +188,89 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     write_png(&args.out.join("frame.png"), &png.ldr)?;
     write_exr(&args.out.join("frame.exr"), &exr)?;
 
+    // Error against a path tracer from the same camera: radiance, no SSAO, no bloom.
+    let reference = match (&args.reference_image, args.scene.builtin.as_deref()) {
+        (Some(p), _) => Some(std::fs::read(p).with_context(|| format!("{}", p.display()))?),
+        (None, Some("cornell-box" | "cornell_box" | "cornell")) => {
+            Some(CORNELL_RENDER_REFERENCE.to_vec())
+        }
+        _ => None,
+    };
+    let mut against = serde_json::Value::Null;
+    if let Some(bytes) = reference {
+        let reference = radiant::render::capture::read_image(&bytes)?;
+        let plain = FrameSettings {
+            debug_view: DebugView::Lit,
+            ..FrameSettings::MINIMAL
+        };
+        // 4×4 supersampled and box-filtered, like the path tracer's pixels.
+        const SS: u32 = 4;
+        let ours = frame
+            .capture(&gpu, reference.width * SS, reference.height * SS, &plain)?
+            .hdr
+            .box_downsample(SS);
+        // Emitter pixels (and their neighbours) separately: their edges decide most of the
+        // difference, and the surfaces are what the bake is about.
+        let emissive = frame
+            .capture(
+                &gpu,
+                reference.width * SS,
+                reference.height * SS,
+                &FrameSettings {
+                    debug_view: DebugView::Emissive,
+                    ..plain
+                },
+            )?
+            .hdr
+            .box_downsample(SS);
+        let (w, h) = (reference.width as i64, reference.height as i64);
+        let lit = |x: i64, y: i64| {
+            (0..w).contains(&x)
+                && (0..h).contains(&y)
+                && emissive.texels[(y * w + x) as usize][..3]
+                    .iter()
+                    .any(|&v| v > 0.0)
+        };
+        let mask = |img: &radiant::render::capture::Image| {
+            let mut img = img.clone();
+            for y in 0..h {
+                for x in 0..w {
+                    if (-1..=1).any(|dy| (-1..=1).any(|dx| lit(x + dx, y + dy))) {
+                        img.texels[(y * w + x) as usize] = [0.0; 4];
+                    }
+                }
+            }
+            img
+        };
+        let all = radiant::render::capture::compare_images(&ours, &reference, 4);
+        let surfaces = radiant::render::capture::compare_images(&mask(&ours), &mask(&reference), 4);
+        if let (Some(e), Some(s)) = (all, surfaces) {
+            println!(
+                "against the path-traced reference ({}×{}, same camera, 16 samples per pixel):",
+                reference.width, reference.height
+            );
+            println!(
+                "  whole image: L1 {:.2} % per pixel, {:.2} % over 4×4 blocks, mean bias {:+.2} %",
+                100.0 * e.rel_l1,
+                100.0 * e.rel_l1_blocks,
+                100.0 * e.mean_bias
+            );
+            println!(
+                "  surfaces (emitter pixels excluded): L1 {:.2} %, {:.2} % over 4×4 blocks, mean bias {:+.2} %",
+                100.0 * s.rel_l1,
+                100.0 * s.rel_l1_blocks,
+                100.0 * s.mean_bias
+            );
+            let j = |e: radiant::render::capture::ImageError| json!({"rel_l1": e.rel_l1, "rel_l1_4x4": e.rel_l1_blocks, "mean_bias": e.mean_bias});
+            against = json!({
+                "size": [reference.width, reference.height],
+                "supersampling": SS * SS,
+                "whole_image": j(e),
+                "surfaces": j(s),
+            });
+        }
+    }
+
     let mut timings = serde_json::Value::Null;
     if args.timings > 0 {
         let target = gpu
@@ -261,6 +353,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         })),
         "exr": if args.exr_effects { "with the frame's effects" } else { "radiance: no SSAO, no bloom" },
         "timings": timings,
+        "path_traced_reference": against,
     });
     write_atomic(
         &args.out.join("render.json"),

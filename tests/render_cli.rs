@@ -25,8 +25,6 @@ fn render_writes_a_tone_mapped_png_a_linear_exr_and_a_report() {
             "cornell-box",
             "--patch-size",
             "0.3",
-            "--lightmap-cell",
-            "8",
             "--size",
             "96x80",
             "--out",
@@ -63,6 +61,15 @@ fn render_writes_a_tone_mapped_png_a_linear_exr_and_a_report() {
     let passes = report["graph"]["passes"].as_array().expect("passes");
     assert!(passes.iter().any(|p| p == "ssao_pass"));
     assert!(passes.iter().any(|p| p == "bloom_composite_pass"));
+    // The builtin box is compared with Mitsuba 3 from the same camera (supersampled radiance,
+    // no SSAO, no bloom). At this coarse bake (patch size 0.3, 32 texels per triangle side)
+    // the surfaces were measured at 2.98 % L1 and -0.33 % bias (8.7 % L1 with 8 texels); the
+    // bounds leave room for drivers, not for regressions.
+    let s = &report["path_traced_reference"]["surfaces"];
+    let l1 = s["rel_l1"].as_f64().expect("l1");
+    let bias = s["mean_bias"].as_f64().expect("bias");
+    assert!(l1 < 0.04, "surface L1 {l1}");
+    assert!(bias.abs() < 0.01, "surface bias {bias}");
     let _ = std::fs::remove_dir_all(&out);
 }
 

@@ -199,6 +199,105 @@ pub fn write_exr(path: &Path, img: &Image) -> Result<(), RenderError> {
     })
 }
 
+/// Reads an image file (EXR, HDR, PNG) as linear RGBA f32 as stored.
+pub fn read_image(bytes: &[u8]) -> Result<Image, RenderError> {
+    let img = image::load_from_memory(bytes)
+        .map_err(|e| RenderError::Image(e.to_string()))?
+        .to_rgba32f();
+    Ok(Image {
+        width: img.width(),
+        height: img.height(),
+        texels: img.pixels().map(|p| p.0).collect(),
+    })
+}
+
+impl Image {
+    /// Averages `factor × factor` tiles: the box pixel filter of a path tracer, from an image
+    /// rendered `factor` times larger (supersampling; the renderer itself does not antialias).
+    pub fn box_downsample(&self, factor: u32) -> Image {
+        let f = factor.max(1);
+        let (w, h) = (self.width / f, self.height / f);
+        let mut texels = vec![[0.0f32; 4]; (w * h) as usize];
+        let norm = 1.0 / f64::from(f * f);
+        for y in 0..h {
+            for x in 0..w {
+                let mut acc = [0.0f64; 4];
+                for j in 0..f {
+                    for i in 0..f {
+                        let t = self.at(x * f + i, y * f + j);
+                        for c in 0..4 {
+                            acc[c] += f64::from(t[c]);
+                        }
+                    }
+                }
+                texels[(y * w + x) as usize] = acc.map(|v| (v * norm) as f32);
+            }
+        }
+        Image {
+            width: w,
+            height: h,
+            texels,
+        }
+    }
+}
+
+/// How far an image is from a reference of the same size.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ImageError {
+    /// Σ|a − b| / Σ|b| over pixels and RGB channels.
+    pub rel_l1: f64,
+    /// The same after averaging both over `block × block` tiles (less sensitive to noise in
+    /// the reference and to edge aliasing).
+    pub rel_l1_blocks: f64,
+    /// Relative difference of the image means (RGB summed).
+    pub mean_bias: f64,
+}
+
+/// Compares linear images; `None` when the sizes differ. Accumulates in f64.
+pub fn compare_images(a: &Image, reference: &Image, block: u32) -> Option<ImageError> {
+    if (a.width, a.height) != (reference.width, reference.height) || a.texels.is_empty() {
+        return None;
+    }
+    let l1 = |x: &[[f64; 3]], y: &[[f64; 3]]| {
+        let (mut num, mut den) = (0.0, 0.0);
+        for (p, q) in x.iter().zip(y) {
+            for c in 0..3 {
+                num += (p[c] - q[c]).abs();
+                den += q[c].abs();
+            }
+        }
+        num / den.max(1e-300)
+    };
+    let rgb = |img: &Image| -> Vec<[f64; 3]> {
+        img.texels
+            .iter()
+            .map(|t| [f64::from(t[0]), f64::from(t[1]), f64::from(t[2])])
+            .collect()
+    };
+    let (x, y) = (rgb(a), rgb(reference));
+    let blocks = |v: &[[f64; 3]]| -> Vec<[f64; 3]> {
+        let b = block.max(1);
+        let (bw, bh) = (a.width / b, a.height / b);
+        let mut out = vec![[0.0; 3]; (bw * bh) as usize];
+        for j in 0..bh * b {
+            for i in 0..bw * b {
+                let o = &mut out[((j / b) * bw + i / b) as usize];
+                let p = v[(j * a.width + i) as usize];
+                for c in 0..3 {
+                    o[c] += p[c];
+                }
+            }
+        }
+        out
+    };
+    let sum = |v: &[[f64; 3]]| v.iter().flatten().sum::<f64>();
+    Some(ImageError {
+        rel_l1: l1(&x, &y),
+        rel_l1_blocks: l1(&blocks(&x), &blocks(&y)),
+        mean_bias: (sum(&x) - sum(&y)) / sum(&y).max(1e-300),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -211,5 +310,30 @@ mod tests {
         assert_eq!(f16_to_f32(0x0001), 2f32.powi(-24));
         assert!(f16_to_f32(0x7e00).is_nan());
         assert_eq!(f16_to_f32(0x7c00), f32::INFINITY);
+    }
+
+    #[test]
+    fn image_comparison_measures_what_it_says() {
+        let img = |v: f32| Image {
+            width: 4,
+            height: 4,
+            texels: vec![[v, v, v, 1.0]; 16],
+        };
+        let e = compare_images(&img(1.1), &img(1.0), 2).expect("same size");
+        assert!((e.rel_l1 - 0.1).abs() < 1e-6 && (e.mean_bias - 0.1).abs() < 1e-6);
+        // A checkerboard error cancels in 2×2 blocks.
+        let mut checker = img(1.0);
+        for (k, t) in checker.texels.iter_mut().enumerate() {
+            let d = if (k % 4 + k / 4) % 2 == 0 { 0.2 } else { -0.2 };
+            *t = [1.0 + d; 4];
+        }
+        let e = compare_images(&checker, &img(1.0), 2).expect("same size");
+        assert!((e.rel_l1 - 0.2).abs() < 1e-6 && e.rel_l1_blocks < 1e-6);
+        let small = Image {
+            width: 2,
+            height: 2,
+            texels: vec![[1.0; 4]; 4],
+        };
+        assert!(compare_images(&small, &img(1.0), 2).is_none());
     }
 }
