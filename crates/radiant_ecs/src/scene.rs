@@ -110,7 +110,8 @@ impl Plugin for ScenePlugin {
 }
 
 /// Spawns `scene` as a root entity with one child per surface (its triangles in the root's
-/// space, [`Static`]), one per light and the camera. Returns the root.
+/// space, [`Static`] unless the surface is dynamic), one per light and the camera. Returns the
+/// root.
 pub fn spawn_scene(world: &mut World, scene: &Scene) -> Entity {
     let root = world
         .spawn((SceneRoot, Transform::IDENTITY, Name::new("scene")))
@@ -122,7 +123,7 @@ pub fn spawn_scene(world: &mut World, scene: &Scene) -> Entity {
         }
     }
     for (i, (s, triangles)) in scene.surfaces.iter().zip(tris).enumerate() {
-        world.spawn((
+        let mut e = world.spawn((
             Name::new(s.name.clone()),
             Transform::IDENTITY,
             Geometry { triangles },
@@ -130,10 +131,13 @@ pub fn spawn_scene(world: &mut World, scene: &Scene) -> Entity {
                 reflectance: s.reflectance,
                 emission: s.emission,
             },
-            Static,
             SurfaceOrder(i as u32),
             ChildOf(root),
         ));
+        // glTF nodes are static unless their extras say dynamic.
+        if !s.dynamic {
+            e.insert(Static);
+        }
     }
     for l in &scene.lights {
         world.spawn((
@@ -192,6 +196,7 @@ pub fn gather_scene(world: &mut World) -> Scene {
             name,
             reflectance: material.reflectance,
             emission: material.emission,
+            dynamic: false,
         });
         for t in &geometry.triangles {
             scene.triangles.push(Triangle {

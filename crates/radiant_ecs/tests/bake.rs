@@ -301,3 +301,55 @@ fn a_bake_resumes_from_its_checkpoint_after_a_restart() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn dynamic_surfaces_stay_out_of_the_bake() {
+    let mut scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    for s in &mut scene.surfaces {
+        s.dynamic = s.name.starts_with("tall_block");
+    }
+    let mut app = App::new();
+    app.add_plugins(RadiantPlugins)
+        .insert_resource(RadiosityBake {
+            params: params(),
+            ..RadiosityBake::default()
+        });
+    spawn_scene(&mut app.world, &scene);
+    let statics = app
+        .world
+        .query_filtered::<(), (With<Geometry>, With<Static>)>()
+        .iter(&app.world)
+        .count();
+    assert_eq!(statics, scene.surfaces.len() - 5);
+    converge(&mut app);
+    // The bake is that of the scene without the tall block.
+    let want = Bake::new(&scene, &params())
+        .expect("bake")
+        .run_to_end(&mut |_| {})
+        .expect("solve");
+    let got = &app.world.resource::<BakedLighting>().surfaces;
+    for b in &want.surfaces {
+        if let Some(a) = got.iter().find(|a| a.name == b.name) {
+            for c in 0..3 {
+                assert!((a.mean[c] - b.mean[c]).abs() <= 1e-4 * b.mean[c].abs().max(1e-3));
+            }
+        }
+    }
+    // Making the block static again bakes it in.
+    let mut q = app.world.query::<(Entity, &Name)>();
+    let block: Vec<Entity> = q
+        .iter(&app.world)
+        .filter(|(_, n)| n.as_str().starts_with("tall_block"))
+        .map(|(e, _)| e)
+        .collect();
+    for e in block {
+        app.world.entity_mut(e).insert(Static);
+    }
+    app.update();
+    converge(&mut app);
+    assert_eq!(app.world.resource::<BakeStatus>().builds, 2);
+    assert_eq!(
+        app.world.resource::<BakedLighting>().surfaces.len(),
+        scene.surfaces.len()
+    );
+}

@@ -265,6 +265,14 @@ impl Bake {
         saved: Option<crate::checkpoint::Saved>,
     ) -> Result<Bake, BakeError> {
         let started = Instant::now();
+        // Dynamic surfaces take no part in the bake.
+        let static_part;
+        let scene = if scene.surfaces.iter().any(|s| s.dynamic) {
+            static_part = scene.static_part();
+            &static_part
+        } else {
+            scene
+        };
         validate(scene)?;
         let p = &params.solver_params;
         if !(p.tolerance.is_finite() && p.tolerance > 0.0) {

@@ -52,6 +52,7 @@ pub fn add_surface(
         material: name.into(),
         reflectance: rho,
         emission,
+        dynamic: false,
     });
     scene
         .triangles

@@ -146,7 +146,7 @@ fn load(bytes: &[u8], base: Option<&Path>) -> Result<Scene, SceneError> {
             return Err(SceneError::NonFiniteTransform { node: name });
         }
         if let Some(mesh) = node.mesh() {
-            importer.mesh(&name, &mesh, world)?;
+            importer.mesh(&name, &mesh, world, is_dynamic(&node))?;
         }
         if let Some(light) = node.light() {
             importer.light(&name, &light, world)?;
@@ -171,6 +171,18 @@ fn load(bytes: &[u8], base: Option<&Path>) -> Result<Scene, SceneError> {
         }
     }
     Ok(importer.scene)
+}
+
+/// Whether a node's extras mark it dynamic: `{"radiant": {"dynamic": true}}`. Malformed extras
+/// leave it static.
+fn is_dynamic(node: &gltf::Node) -> bool {
+    let Some(raw) = node.extras() else {
+        return false;
+    };
+    serde_json::from_str::<serde_json::Value>(raw.get())
+        .ok()
+        .and_then(|v| v.get("radiant")?.get("dynamic")?.as_bool())
+        .unwrap_or(false)
 }
 
 /// gltf-json's validation indexes the accessor array with each primitive's POSITION index
@@ -358,7 +370,13 @@ impl Importer<'_> {
         Ok((rho, emission, name))
     }
 
-    fn mesh(&mut self, node_name: &str, mesh: &gltf::Mesh, world: DMat4) -> Result<(), SceneError> {
+    fn mesh(
+        &mut self,
+        node_name: &str,
+        mesh: &gltf::Mesh,
+        world: DMat4,
+        dynamic: bool,
+    ) -> Result<(), SceneError> {
         let prims: Vec<_> = mesh.primitives().collect();
         let flip = world.determinant() < 0.0;
         for (k, prim) in prims.iter().enumerate() {
@@ -456,6 +474,7 @@ impl Importer<'_> {
                 material,
                 reflectance,
                 emission,
+                dynamic,
             });
             for [a, b, c] in tris {
                 let (a, b, c) = (verts[a as usize], verts[b as usize], verts[c as usize]);

@@ -122,6 +122,9 @@ pub struct Surface {
     pub reflectance: [f64; 3],
     /// Emitted radiance per linear RGB channel (glTF emissive units: emissiveFactor × strength).
     pub emission: [f64; 3],
+    /// Not part of the bake (neither receiver nor occluder): a glTF node whose extras hold
+    /// `{"radiant": {"dynamic": true}}`. Surfaces are static by default.
+    pub dynamic: bool,
 }
 
 impl Surface {
@@ -235,6 +238,24 @@ impl Scene {
                 .any(|t| self.surfaces[t.surface as usize].is_emitter())
     }
 
+    /// The same scene without the triangles of dynamic surfaces (the surfaces stay, so indices
+    /// do not change).
+    pub fn static_part(&self) -> Scene {
+        Scene {
+            triangles: self
+                .triangles
+                .iter()
+                .filter(|t| {
+                    self.surfaces
+                        .get(t.surface as usize)
+                        .is_none_or(|s| !s.dynamic)
+                })
+                .copied()
+                .collect(),
+            ..self.clone()
+        }
+    }
+
     /// Warnings for the report: skipped input.
     pub fn warnings(&self) -> Vec<String> {
         let mut w = Vec::new();
@@ -329,5 +350,39 @@ mod tests {
             builtin("teapot"),
             Err(SceneError::UnknownBuiltin(_))
         ));
+    }
+
+    #[test]
+    fn gltf_extras_mark_nodes_dynamic() {
+        let mut doc: serde_json::Value =
+            serde_json::from_str(CORNELL_BOX_GLTF).expect("builtin glTF is JSON");
+        let nodes = doc["nodes"].as_array_mut().expect("nodes");
+        let mut marked = 0;
+        for n in nodes.iter_mut() {
+            if n["name"]
+                .as_str()
+                .is_some_and(|s| s.starts_with("tall_block"))
+            {
+                n["extras"] = serde_json::json!({"radiant": {"dynamic": true}});
+                marked += 1;
+            } else if n["name"] == "floor" {
+                // Malformed or unrelated extras leave a node static.
+                n["extras"] = serde_json::json!({"radiant": {"dynamic": "yes"}, "other": 1});
+            }
+        }
+        assert_eq!(marked, 5);
+        let text = serde_json::to_string(&doc).expect("serialise");
+        let scene = load_gltf_slice(text.as_bytes()).expect("loads");
+        let dynamic: Vec<&str> = scene
+            .surfaces
+            .iter()
+            .filter(|s| s.dynamic)
+            .map(|s| s.name.as_str())
+            .collect();
+        assert_eq!(dynamic.len(), 5, "{dynamic:?}");
+        assert!(dynamic.iter().all(|n| n.starts_with("tall_block")));
+        let static_part = scene.static_part();
+        assert_eq!(static_part.surfaces.len(), scene.surfaces.len());
+        assert_eq!(static_part.triangles.len(), scene.triangles.len() - 10);
     }
 }
