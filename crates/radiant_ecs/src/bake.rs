@@ -98,8 +98,12 @@ pub struct BakeStatus {
     pub iterations_since_edit: u64,
     /// Bakes built from scratch (geometry or light changes).
     pub builds: u64,
-    /// Material edits applied by warm start.
+    /// Edits applied by warm start (materials, lights, rigid moves).
     pub edits: u64,
+    /// Rigid moves of static geometry among them, and the links they recomputed in total.
+    pub geometry_edits: u64,
+    /// Links recomputed by geometry edits (the rest were kept).
+    pub links_recomputed: usize,
     /// True while the published light no longer matches the scene (an edit is being baked).
     pub stale: bool,
     /// Elements and links of the current bake.
@@ -235,7 +239,7 @@ pub fn detect_scene_changes(
 enum Control {
     Pause,
     Cancel,
-    Edit(Vec<Surface>, Option<Vec<Light>>, u64),
+    Edit(Edit, u64),
 }
 
 enum Report {
@@ -247,6 +251,12 @@ enum Report {
         resumed: bool,
     },
     Edited,
+    Remeshed {
+        mesh: Arc<Mesh>,
+        links: usize,
+        contraction: f64,
+        recomputed: usize,
+    },
     Step {
         t: f64,
         iterations: u64,
@@ -274,15 +284,34 @@ enum Start {
     Continue(Box<Bake>, Option<Edit>),
 }
 
-/// A change that keeps the links: new materials, and new lights if they changed.
+/// A change the bake absorbs without starting over: new materials, new lights, and rigid moves
+/// of static geometry (the scene to move to).
 struct Edit {
     surfaces: Vec<Surface>,
     lights: Option<Vec<Light>>,
+    geometry: Option<Arc<Scene>>,
 }
 
-fn apply(bake: &mut Bake, edit: &Edit) -> Result<(), radiant_radiosity::BakeError> {
+fn apply(
+    bake: &mut Bake,
+    edit: &Edit,
+    tx: &mpsc::Sender<Report>,
+) -> Result<(), radiant_radiosity::BakeError> {
+    if edit.surfaces.len() != bake.surfaces.len() {
+        // Static surfaces were added or removed: not an edit.
+        return Err(radiant_radiosity::BakeError::NeedsRebuild);
+    }
     bake.edit_surfaces(&edit.surfaces)?;
-    if let Some(l) = &edit.lights {
+    if let Some(scene) = &edit.geometry {
+        // Lights come with the scene.
+        let stats = bake.edit_geometry(scene)?;
+        let _ = tx.send(Report::Remeshed {
+            mesh: Arc::new(bake.mesh.clone()),
+            links: bake.system.links.len(),
+            contraction: bake.system.contraction(),
+            recomputed: stats.recomputed,
+        });
+    } else if let Some(l) = &edit.lights {
         bake.edit_lights(l)?;
     }
     Ok(())
@@ -374,7 +403,7 @@ fn work(
         },
         Start::Continue(mut b, edit) => {
             if let Some(edit) = edit {
-                match apply(&mut b, &edit) {
+                match apply(&mut b, &edit, &tx) {
                     Ok(()) => send(Report::Edited),
                     Err(radiant_radiosity::BakeError::NeedsRebuild) => {
                         return Outcome::NeedsRebuild;
@@ -396,19 +425,17 @@ fn work(
                     save(&bake, &setup, &tx);
                     return Outcome::Paused(bake, epoch);
                 }
-                Control::Edit(surfaces, lights, e) => {
-                    match apply(&mut bake, &Edit { surfaces, lights }) {
-                        Ok(()) => {
-                            epoch = e;
-                            (best, since_best) = (f64::INFINITY, 0);
-                            send(Report::Edited);
-                        }
-                        Err(radiant_radiosity::BakeError::NeedsRebuild) => {
-                            return Outcome::NeedsRebuild;
-                        }
-                        Err(err) => return Outcome::Failed(err.to_string()),
+                Control::Edit(edit, e) => match apply(&mut bake, &edit, &tx) {
+                    Ok(()) => {
+                        epoch = e;
+                        (best, since_best) = (f64::INFINITY, 0);
+                        send(Report::Edited);
                     }
-                }
+                    Err(radiant_radiosity::BakeError::NeedsRebuild) => {
+                        return Outcome::NeedsRebuild;
+                    }
+                    Err(err) => return Outcome::Failed(err.to_string()),
+                },
             }
         }
         // One sweep (or one shot) per step: the same sequence whatever the timing.
@@ -548,6 +575,20 @@ fn drain(world: &mut World) {
                 s.builds += 1;
                 s.resumed = resumed;
                 s.warning = None;
+            }
+            Report::Remeshed {
+                mesh,
+                links,
+                contraction,
+                recomputed,
+            } => {
+                let mut w = world.resource_mut::<BakeWorker>();
+                w.mesh = Some(mesh);
+                w.contraction = contraction;
+                let mut s = world.resource_mut::<BakeStatus>();
+                s.links = links;
+                s.geometry_edits += 1;
+                s.links_recomputed += recomputed;
             }
             Report::Edited => {
                 let iterations = world.resource::<BakeStatus>().iterations;
@@ -720,11 +761,27 @@ pub fn drive_bake(world: &mut World) {
         }
         let mut w = world.resource_mut::<BakeWorker>();
         w.epoch += 1;
-        w.rebuild = Some(Arc::new(scene));
-        w.edit = None;
-        w.idle = None;
-        if let Some(tx) = &w.to_worker {
-            let _ = tx.send(Control::Cancel);
+        let epoch = w.epoch;
+        let has_bake = w.task.is_some() || w.idle.is_some();
+        if control.rebake || !has_bake || w.rebuild.is_some() {
+            w.rebuild = Some(Arc::new(scene));
+            w.edit = None;
+            w.idle = None;
+            if let Some(tx) = &w.to_worker {
+                let _ = tx.send(Control::Cancel);
+            }
+        } else {
+            // A rigid move keeps what it does not touch; the worker rebuilds if it is not one.
+            let edit = Edit {
+                surfaces: scene.surfaces.clone(),
+                lights: None,
+                geometry: Some(Arc::new(scene)),
+            };
+            if let Some(tx) = &w.to_worker {
+                let _ = tx.send(Control::Edit(edit, epoch));
+            } else {
+                w.edit = Some(edit);
+            }
         }
         world.resource_mut::<BakeStatus>().stale = true;
     } else if changes.materials || changes.lights {
@@ -742,15 +799,24 @@ pub fn drive_bake(world: &mut World) {
         if w.rebuild.is_some() || (w.task.is_none() && w.idle.is_none()) {
             // No bake to edit (none yet, or the scene had no emitters): build one.
             w.rebuild = Some(Arc::new(scene));
-        } else if let Some(tx) = &w.to_worker {
-            let _ = tx.send(Control::Edit(scene.surfaces, lights, epoch));
         } else {
-            // Merge with an edit still waiting (its lights stay if these did not change).
-            let lights = lights.or_else(|| w.edit.take().and_then(|e| e.lights));
-            w.edit = Some(Edit {
+            // Merge with an edit still waiting: a pending move carries the whole scene.
+            let pending = w.edit.take();
+            let geometry = pending
+                .as_ref()
+                .and_then(|e| e.geometry.as_ref())
+                .map(|_| Arc::new(scene.clone()));
+            let lights = lights.or_else(|| pending.and_then(|e| e.lights));
+            let edit = Edit {
                 surfaces: scene.surfaces,
                 lights,
-            });
+                geometry,
+            };
+            if let Some(tx) = &w.to_worker {
+                let _ = tx.send(Control::Edit(edit, epoch));
+            } else {
+                w.edit = Some(edit);
+            }
         }
         world.resource_mut::<BakeStatus>().stale = true;
     }

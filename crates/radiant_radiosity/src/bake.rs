@@ -3,6 +3,7 @@
 
 use std::time::{Duration, Instant};
 
+use glam::DVec3;
 use radiant_scene::{Light, Scene, Surface};
 use radiant_visibility::{Bvh, Visibility};
 
@@ -172,6 +173,11 @@ pub struct Bake {
     fingerprint: u64,
     /// Whether this bake was resumed from a checkpoint.
     resumed: bool,
+    /// The refinement oracle's estimate and threshold the links were built with.
+    bhat: Vec<f64>,
+    eps: f64,
+    /// Lights of the scene (for geometry edits, which recompute direct light).
+    lights: Vec<Light>,
     solver: Box<dyn Solver>,
     started: Instant,
     solving: Duration,
@@ -380,6 +386,8 @@ impl Bake {
         if dead_count > 0 {
             tracing::debug!("{dead_count} elements lie inside closed geometry");
         }
+        let (bhat, amb) = estimates(&mesh, &rho, &source);
+        let eps = (params.links.refinement * amb).max(f64::MIN_POSITIVE);
         let system = System::new(&mesh, rho, source, links, &dead);
         let mut solver = new_solver(params.solver, &system, params.solver_params);
         if let Some(b) = &saved_b {
@@ -397,6 +405,9 @@ impl Bake {
             dead,
             fingerprint,
             resumed,
+            bhat,
+            eps,
+            lights: scene.lights.clone(),
             solver,
             started,
             solving: Duration::ZERO,
@@ -529,6 +540,7 @@ impl Bake {
             }
         }
         let old = self.direct.take();
+        let old_lights = std::mem::replace(&mut self.lights, lights.to_vec());
         if !lights.is_empty() {
             let bvh = Bvh::new(&self.mesh.root_triangles_f32());
             self.direct = Some(lights::direct_irradiance(&self.mesh, lights, &bvh));
@@ -537,8 +549,120 @@ impl Bake {
         let result = self.edit_surfaces(&surfaces);
         if result.is_err() {
             self.direct = old;
+            self.lights = old_lights;
         }
         result
+    }
+
+    /// Moves static geometry rigidly (the same triangles, surfaces and subdivision; new vertex
+    /// positions) and keeps what the move does not touch: the form factors of links whose
+    /// receiver and source did not move and whose shaft misses the moved geometry's old and new
+    /// bounds (see [`links::update`]). Direct light and enclosed elements are computed again,
+    /// and the solve warm-starts from the current solution. Returns
+    /// [`BakeError::NeedsRebuild`] when the edit is not such a move (other triangle counts,
+    /// another subdivision, a changed bounding box of the scene).
+    pub fn edit_geometry(&mut self, scene: &Scene) -> Result<links::UpdateStats, BakeError> {
+        let static_part;
+        let scene = if scene.surfaces.iter().any(|s| s.dynamic) {
+            static_part = scene.static_part();
+            &static_part
+        } else {
+            scene
+        };
+        validate(scene)?;
+        if !self.has_emitters || scene.surfaces.len() != self.surfaces.len() {
+            return Err(BakeError::NeedsRebuild);
+        }
+        let mesh = Mesh::new(scene, &self.params.mesh)?;
+        let same_shape = mesh.frame.center == self.mesh.frame.center
+            && mesh.frame.scale == self.mesh.frame.scale
+            && mesh.nodes.len() == self.mesh.nodes.len()
+            && mesh.roots == self.mesh.roots
+            && mesh.root_surface == self.mesh.root_surface
+            && mesh.nodes.iter().zip(&self.mesh.nodes).all(|(a, b)| {
+                (a.first_child, a.leaf_lo, a.leaf_hi, a.root, a.depth)
+                    == (b.first_child, b.leaf_lo, b.leaf_hi, b.root, b.depth)
+            });
+        if !same_shape {
+            return Err(BakeError::NeedsRebuild);
+        }
+        let moved: Vec<bool> = mesh
+            .roots
+            .iter()
+            .zip(&self.mesh.roots)
+            .map(|(&a, &b)| mesh.nodes[a as usize].v != self.mesh.nodes[b as usize].v)
+            .collect();
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for (r, _) in moved.iter().enumerate().filter(|(_, m)| **m) {
+            for m in [&mesh, &self.mesh] {
+                for v in m.nodes[m.roots[r] as usize].v {
+                    lo = lo.min(v);
+                    hi = hi.max(v);
+                }
+            }
+        }
+        let lights_changed = scene.lights != self.lights;
+        if !moved.iter().any(|&m| m) && !lights_changed {
+            return Ok(links::UpdateStats::default());
+        }
+        // The solution so far, read before the system changes under the solver.
+        let b = self.radiosity();
+        let bvh = Bvh::new(&mesh.root_triangles_f32());
+        let n = mesh.element_count();
+        self.direct = (!scene.lights.is_empty())
+            .then(|| lights::direct_irradiance(&mesh, &scene.lights, &bvh));
+        let mut source = Vec::with_capacity(n);
+        for (i, &id) in mesh.leaves.iter().enumerate() {
+            let root = mesh.nodes[id as usize].root as usize;
+            let s = &self.surfaces[mesh.root_surface[root] as usize];
+            let mut e = s.emission;
+            if let Some(d) = &self.direct {
+                for c in 0..3 {
+                    e[c] += s.reflectance[c] * d[i][c] / std::f64::consts::PI;
+                }
+            }
+            source.push(e);
+        }
+        let stats = if moved.iter().any(|&m| m) {
+            let ctx = FfContext {
+                mesh: &mesh,
+                vis: &bvh,
+                params: self.params.ff,
+            };
+            let method = form_factors::method(self.params.form_factors);
+            let (new_links, stats) = links::update(
+                &ctx,
+                method,
+                Oracle {
+                    bhat: &self.bhat,
+                    eps: self.eps,
+                },
+                &self.params.links,
+                &self.system.links,
+                &moved,
+                (lo, hi),
+            );
+            self.dead = enclosed_elements(&mesh, &bvh, self.params.ff.seed);
+            self.system = System::new(
+                &mesh,
+                self.system.rho.clone(),
+                source,
+                new_links,
+                &self.dead,
+            );
+            stats
+        } else {
+            let rho = self.system.rho.clone();
+            self.system.set_materials(rho, source);
+            links::UpdateStats::default()
+        };
+        self.mesh = mesh;
+        self.lights = scene.lights.clone();
+        self.fingerprint = crate::checkpoint::fingerprint(scene, &self.params);
+        self.solver = new_solver(self.params.solver, &self.system, self.params.solver_params);
+        self.solver.warm_start(&self.system, &b);
+        self.last = None;
+        Ok(stats)
     }
 
     /// Seconds since the bake started.

@@ -16,6 +16,7 @@ use rayon::prelude::*;
 
 use crate::form_factors::{FfContext, FormFactorMethod, Row, analytic::point_to_triangle};
 use crate::mesh::Mesh;
+use glam::DVec3;
 
 /// Refinement parameters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -218,5 +219,231 @@ fn refine(
             fs.push(f);
             samples.push(nsamples);
         }
+    }
+}
+
+/// What [`update`] recomputed and kept.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct UpdateStats {
+    /// Links whose form factor was computed again.
+    pub recomputed: usize,
+    /// Links whose form factor was kept.
+    pub kept: usize,
+}
+
+/// Whether the tetrahedron `t` (a receiver point and a source triangle: the volume the
+/// visibility rays of a link sweep) overlaps the box `[lo, hi]`, by separating axes.
+pub fn shaft_hits_box(t: &[DVec3; 4], lo: DVec3, hi: DVec3) -> bool {
+    let centre = (lo + hi) * 0.5;
+    let half = (hi - lo) * 0.5;
+    let overlaps = |axis: DVec3| -> bool {
+        if axis.length_squared() < 1e-24 {
+            return true;
+        }
+        let r = half.x * axis.x.abs() + half.y * axis.y.abs() + half.z * axis.z.abs();
+        let c = centre.dot(axis);
+        let (mut mn, mut mx) = (f64::INFINITY, f64::NEG_INFINITY);
+        for p in t {
+            let d = p.dot(axis);
+            mn = mn.min(d);
+            mx = mx.max(d);
+        }
+        mx >= c - r && mn <= c + r
+    };
+    let box_axes = [DVec3::X, DVec3::Y, DVec3::Z];
+    if !box_axes.iter().all(|&a| overlaps(a)) {
+        return false;
+    }
+    const FACES: [[usize; 3]; 4] = [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]];
+    for f in FACES {
+        if !overlaps((t[f[1]] - t[f[0]]).cross(t[f[2]] - t[f[0]])) {
+            return false;
+        }
+    }
+    const EDGES: [[usize; 2]; 6] = [[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]];
+    for e in EDGES {
+        let d = t[e[1]] - t[e[0]];
+        for a in box_axes {
+            if !overlaps(d.cross(a)) {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+/// Updates links after some input triangles moved rigidly (`moved_root`), keeping the form
+/// factor of every link whose receiver and source did not move and whose shaft misses
+/// `moved_box` (the moved geometry's bounds before and after, local frame). Rows are refined
+/// again with the same oracle, so unmoved pairs keep their structure; links missing from the
+/// old row (fully occluded then) are computed again, as is everything touching moved geometry.
+/// Per-link methods (analytic, ray-cast) recompute only those links; the others recompute the
+/// whole row when any of its links needs it.
+pub fn update(
+    ctx: &FfContext,
+    method: &dyn FormFactorMethod,
+    oracle: Oracle,
+    params: &LinkParams,
+    old: &Links,
+    moved_root: &[bool],
+    moved_box: (DVec3, DVec3),
+) -> (Links, UpdateStats) {
+    use crate::form_factors::FormFactorKind;
+    let mesh = ctx.mesh;
+    let n = mesh.element_count();
+    let per_link = matches!(
+        method.kind(),
+        FormFactorKind::Analytic | FormFactorKind::RayCast
+    );
+    let (lo, hi) = (
+        moved_box.0 - DVec3::splat(1e-9),
+        moved_box.1 + DVec3::splat(1e-9),
+    );
+    const CHUNK: usize = 64;
+    type Chunk = (Vec<u32>, Vec<u32>, Vec<f32>, UpdateStats);
+    let chunks: Vec<Chunk> = (0..n.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            let (first, last) = (c * CHUNK, ((c + 1) * CHUNK).min(n));
+            let mut counts = Vec::with_capacity(last - first);
+            let (mut src, mut ff) = (Vec::new(), Vec::new());
+            let mut stats = UpdateStats::default();
+            let mut stack = Vec::new();
+            let (mut row_src, mut row_f, mut row_s) = (Vec::new(), Vec::new(), Vec::new());
+            let (mut sub_src, mut sub_f, mut sub_s, mut sub_k) =
+                (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+            let mut out = Vec::new();
+            for leaf in first..last {
+                row_src.clear();
+                row_f.clear();
+                row_s.clear();
+                refine(
+                    mesh,
+                    leaf as u32,
+                    oracle,
+                    params,
+                    &mut stack,
+                    &mut row_src,
+                    &mut row_f,
+                    &mut row_s,
+                );
+                let r = mesh.leaf_node(leaf as u32);
+                let receiver_moved = moved_root[r.root as usize];
+                // Old values by merge on first leaf (both rows are sorted by it).
+                let (olo, ohi) = (old.row[leaf], old.row[leaf + 1]);
+                let mut o = olo;
+                let mut values = vec![None::<f32>; row_src.len()];
+                let mut need = vec![receiver_moved; row_src.len()];
+                for (k, &s) in row_src.iter().enumerate() {
+                    let node = &mesh.nodes[s as usize];
+                    while o < ohi && mesh.nodes[old.src[o] as usize].leaf_lo < node.leaf_lo {
+                        o += 1;
+                    }
+                    if o < ohi && old.src[o] == s {
+                        values[k] = Some(old.ff[o]);
+                    }
+                    if !need[k] {
+                        need[k] = moved_root[node.root as usize]
+                            || values[k].is_none()
+                            || shaft_hits_box(
+                                &[r.centroid, node.v[0], node.v[1], node.v[2]],
+                                lo,
+                                hi,
+                            );
+                    }
+                }
+                if !per_link && need.iter().any(|&x| x) {
+                    need.iter_mut().for_each(|x| *x = true);
+                }
+                sub_src.clear();
+                sub_f.clear();
+                sub_s.clear();
+                sub_k.clear();
+                for k in 0..row_src.len() {
+                    if need[k] {
+                        sub_src.push(row_src[k]);
+                        sub_f.push(row_f[k]);
+                        sub_s.push(row_s[k]);
+                        sub_k.push(k);
+                    }
+                }
+                if !sub_src.is_empty() {
+                    out.clear();
+                    out.resize(sub_src.len(), 0.0f32);
+                    let row = Row {
+                        leaf: leaf as u32,
+                        sources: &sub_src,
+                        unoccluded: &sub_f,
+                        samples: &sub_s,
+                    };
+                    method.compute(ctx, &row, &mut out);
+                    for (j, &k) in sub_k.iter().enumerate() {
+                        values[k] = Some(out[j]);
+                    }
+                }
+                stats.recomputed += sub_src.len();
+                stats.kept += row_src.len() - sub_src.len();
+                let before = src.len();
+                for (k, v) in values.iter().enumerate() {
+                    if let Some(f) = *v
+                        && f > 0.0
+                    {
+                        src.push(row_src[k]);
+                        ff.push(f);
+                    }
+                }
+                counts.push((src.len() - before) as u32);
+            }
+            (counts, src, ff, stats)
+        })
+        .collect();
+    let total: usize = chunks.iter().map(|c| c.1.len()).sum();
+    let mut links = Links {
+        row: Vec::with_capacity(n + 1),
+        src: Vec::with_capacity(total),
+        ff: Vec::with_capacity(total),
+    };
+    let mut stats = UpdateStats::default();
+    links.row.push(0);
+    for (counts, src, ff, s) in chunks {
+        let mut at = links.src.len();
+        for c in counts {
+            at += c as usize;
+            links.row.push(at);
+        }
+        links.src.extend(src);
+        links.ff.extend(ff);
+        stats.recomputed += s.recomputed;
+        stats.kept += s.kept;
+    }
+    (links, stats)
+}
+
+#[cfg(test)]
+mod shaft_tests {
+    use super::*;
+
+    #[test]
+    fn shaft_box_overlap() {
+        let t = [
+            DVec3::ZERO,
+            DVec3::new(0.0, 0.0, 10.0),
+            DVec3::new(1.0, 0.0, 10.0),
+            DVec3::new(0.0, 1.0, 10.0),
+        ];
+        // A box on the shaft's axis.
+        assert!(shaft_hits_box(
+            &t,
+            DVec3::splat(0.05),
+            DVec3::new(0.1, 0.1, 5.0)
+        ));
+        // Beside it, where only the bounding boxes overlap.
+        assert!(!shaft_hits_box(
+            &t,
+            DVec3::new(0.8, 0.8, 0.5),
+            DVec3::new(1.0, 1.0, 1.0)
+        ));
+        // Far away.
+        assert!(!shaft_hits_box(&t, DVec3::splat(20.0), DVec3::splat(21.0)));
     }
 }

@@ -218,3 +218,73 @@ fn a_checkpoint_resumes_without_form_factors_and_refuses_other_scenes() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The builtin box with the short block moved by `dx` metres along x.
+fn moved_block(scene: &Scene, dx: f64) -> Scene {
+    let mut s = scene.clone();
+    for t in &mut s.triangles {
+        if s.surfaces[t.surface as usize]
+            .name
+            .starts_with("short_block")
+        {
+            for v in &mut t.vertices {
+                v.x += dx;
+            }
+        }
+    }
+    s
+}
+
+#[test]
+fn moving_a_block_keeps_untouched_form_factors_and_matches_a_fresh_bake() {
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    let moved = moved_block(&scene, 0.04);
+    for ff in [
+        radiant_radiosity::FormFactorKind::Analytic,
+        radiant_radiosity::FormFactorKind::RayCast,
+    ] {
+        let mut p = params(SolverKind::GaussSeidel);
+        p.form_factors = ff;
+        let mut bake = Bake::new(&scene, &p).expect("bake");
+        solve(&mut bake);
+        let t = std::time::Instant::now();
+        let stats = bake.edit_geometry(&moved).expect("a rigid move");
+        let update_s = t.elapsed().as_secs_f64();
+        solve(&mut bake);
+        let fresh = Bake::new(&moved, &p)
+            .expect("bake")
+            .run_to_end(&mut |_| {})
+            .expect("fresh");
+        // Same links as a fresh bake: every kept form factor is what it would compute.
+        assert_eq!(bake.system.links.row, fresh.system.links.row, "{ff:?}");
+        assert_eq!(bake.system.links.src, fresh.system.links.src, "{ff:?}");
+        assert_eq!(bake.system.links.ff, fresh.system.links.ff, "{ff:?}");
+        let (a, b) = (bake.radiosity(), &fresh.radiosity);
+        let peak = b.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+        let worst = a
+            .iter()
+            .flatten()
+            .zip(b.iter().flatten())
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max);
+        assert!(worst <= 1e-4 * peak, "{ff:?}: differs by {worst}");
+        let share = stats.recomputed as f64 / (stats.recomputed + stats.kept) as f64;
+        assert!(share < 0.9, "{ff:?}: recomputed {share:.2} of the links");
+        eprintln!(
+            "{ff:?}: recomputed {} of {} links ({:.0} %), update {update_s:.3} s",
+            stats.recomputed,
+            stats.recomputed + stats.kept,
+            100.0 * share
+        );
+    }
+    // Not a rigid move of the same triangles: refused, the caller bakes again.
+    let mut p = params(SolverKind::GaussSeidel);
+    p.form_factors = radiant_radiosity::FormFactorKind::Analytic;
+    let mut bake = Bake::new(&scene, &p).expect("bake");
+    let mut fewer = scene.clone();
+    fewer.triangles.pop();
+    assert!(matches!(
+        bake.edit_geometry(&fewer),
+        Err(BakeError::NeedsRebuild)
+    ));
+}
