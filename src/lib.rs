@@ -45,6 +45,8 @@ pub mod bridge {
         let mut rs = RenderScene::from_scene(scene, cell)?;
         if let Some(bake) = bake {
             fill_lightmap_from_bake(&mut rs, scene, bake);
+            // The bake holds the punctual lights' direct light (shadowed): draw it once.
+            radiant_ecs::render::lit_by_bake(&mut rs);
         }
         Ok(rs)
     }

@@ -8,10 +8,12 @@
 //!
 //! The worker is a task on bevy's `AsyncComputeTaskPool`: it builds the bake (meshing, links,
 //! form factors) and solves one sweep (or one shot) per step, so its results do not depend on
-//! timing or thread count. The frame never waits for it. A material edit is sent to the worker,
-//! which keeps the links and warm-starts (`Bake::edit_surfaces`); a change of geometry or
-//! lights bakes again. A bake that converged, or was paused, returns to the world, ready for the
-//! next edit or for resuming.
+//! timing or thread count. The frame never waits for it. Edits are sent to the worker, which
+//! keeps the links and warm-starts: materials (`Bake::edit_surfaces`), lights
+//! (`Bake::edit_lights`) and rigid moves of static geometry (`Bake::edit_geometry`, which
+//! recomputes only the links the move touches); adding or removing static surfaces bakes again.
+//! A bake that converged, or was paused, returns to the world, ready for the next edit or for
+//! resuming; an edit that reaches a worker as it stops is applied on the next start.
 
 use std::sync::{Arc, Mutex, mpsc};
 use std::time::{Duration, Instant};
@@ -96,7 +98,8 @@ pub struct BakeStatus {
     pub iterations: u64,
     /// Sweeps (or shots) since the last material edit: the rebake's work.
     pub iterations_since_edit: u64,
-    /// Bakes built from scratch (geometry or light changes).
+    /// Bakes built from scratch (the first one, added or removed static surfaces, moves that are
+    /// not rigid).
     pub builds: u64,
     /// Edits applied by warm start (materials, lights, rigid moves).
     pub edits: u64,
@@ -191,7 +194,7 @@ impl Plugin for BakePlugin {
 /// What changed since the last frame.
 #[derive(Resource, Clone, Copy, Debug, Default)]
 pub struct SceneChanges {
-    /// Static geometry was added, removed, moved or reshaped, or a light changed.
+    /// Static geometry was added, removed, moved or reshaped.
     pub geometry: bool,
     /// Only materials of static surfaces changed.
     pub materials: bool,
@@ -334,6 +337,7 @@ pub struct BakeWorker {
     iterations_at_edit: u64,
     mesh: Option<Arc<Mesh>>,
     pool: Option<(usize, Arc<rayon::ThreadPool>)>,
+    cancelled: Option<Arc<std::sync::atomic::AtomicBool>>,
 }
 
 impl BakeWorker {
@@ -353,9 +357,14 @@ struct WorkerSetup {
     publish_interval: Duration,
     checkpoint: Option<std::path::PathBuf>,
     epoch: u64,
+    /// Set when the world drops this worker: it then writes no checkpoint (a newer bake may).
+    cancelled: Arc<std::sync::atomic::AtomicBool>,
 }
 
 fn save(bake: &Bake, setup: &WorkerSetup, tx: &mpsc::Sender<Report>) {
+    if setup.cancelled.load(std::sync::atomic::Ordering::Relaxed) {
+        return;
+    }
     if let Some(path) = &setup.checkpoint
         && let Err(e) = bake.write_checkpoint(path)
     {
@@ -422,6 +431,23 @@ fn work(
             match c {
                 Control::Cancel => return Outcome::Cancelled,
                 Control::Pause => {
+                    // Apply edits queued behind the pause, so none is lost.
+                    while let Ok(c) = rx.try_recv() {
+                        match c {
+                            Control::Cancel => return Outcome::Cancelled,
+                            Control::Pause => {}
+                            Control::Edit(edit, e) => match apply(&mut bake, &edit, &tx) {
+                                Ok(()) => {
+                                    epoch = e;
+                                    send(Report::Edited);
+                                }
+                                Err(radiant_radiosity::BakeError::NeedsRebuild) => {
+                                    return Outcome::NeedsRebuild;
+                                }
+                                Err(err) => return Outcome::Failed(err.to_string()),
+                            },
+                        }
+                    }
                     save(&bake, &setup, &tx);
                     return Outcome::Paused(bake, epoch);
                 }
@@ -513,7 +539,9 @@ fn spawn(worker: &mut BakeWorker, settings: &RadiosityBake, start: Start) {
         publish_interval: settings.publish_interval,
         checkpoint: settings.checkpoint.clone(),
         epoch: worker.epoch,
+        cancelled: Arc::new(std::sync::atomic::AtomicBool::new(false)),
     };
+    worker.cancelled = Some(setup.cancelled.clone());
     let tolerance = settings.params.solver_params.tolerance;
     let pool = settings.threads.and_then(|n| thread_pool(worker, n.max(1)));
     // Bevy's async compute pool, if an app set it up; else a small one (the bake's parallel
@@ -666,11 +694,18 @@ fn eta(history: &[(f64, f64)], tol: f64) -> Option<f64> {
     (rate > 0.0 && rate.is_finite()).then(|| (e1.ln() - tol.ln()) / rate)
 }
 
-fn stop(world: &mut World) {
-    let mut w = world.resource_mut::<BakeWorker>();
+fn cancel_worker(w: &mut BakeWorker) {
     if let Some(tx) = &w.to_worker {
         let _ = tx.send(Control::Cancel);
     }
+    if let Some(c) = &w.cancelled {
+        c.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
+fn stop(world: &mut World) {
+    let mut w = world.resource_mut::<BakeWorker>();
+    cancel_worker(&mut w);
     // Dropping the task detaches nothing: the worker sees Cancel at its next step and ends.
     w.task = None;
     w.to_worker = None;
@@ -678,6 +713,22 @@ fn stop(world: &mut World) {
     w.idle = None;
     w.rebuild = None;
     w.edit = None;
+}
+
+/// A worker that stopped behind the world's epoch missed an edit sent as it was stopping:
+/// queue the current scene as an edit, so the next start applies it.
+fn requeue_lost_edit(world: &mut World, epoch: u64) {
+    let w = world.resource::<BakeWorker>();
+    if epoch >= w.epoch || w.edit.is_some() || w.rebuild.is_some() {
+        return;
+    }
+    let scene = gather_scene(world);
+    world.resource_mut::<BakeWorker>().edit = Some(Edit {
+        surfaces: scene.surfaces.clone(),
+        lights: Some(scene.lights.clone()),
+        geometry: Some(Arc::new(scene)),
+    });
+    world.resource_mut::<BakeStatus>().stale = true;
 }
 
 /// Starts, steers and reports on the worker. Exclusive: it gathers the scene when it changed.
@@ -709,10 +760,12 @@ pub fn drive_bake(world: &mut World) {
         match o {
             Outcome::Done(bake, epoch) => {
                 world.resource_mut::<BakeWorker>().idle = Some((bake, epoch));
+                requeue_lost_edit(world, epoch);
             }
             Outcome::Paused(bake, epoch) => {
                 world.resource_mut::<BakeWorker>().idle = Some((bake, epoch));
                 world.resource_mut::<BakeStatus>().phase = BakePhase::Paused;
+                requeue_lost_edit(world, epoch);
             }
             Outcome::Cancelled => {}
             Outcome::NeedsRebuild => {
@@ -767,9 +820,7 @@ pub fn drive_bake(world: &mut World) {
             w.rebuild = Some(Arc::new(scene));
             w.edit = None;
             w.idle = None;
-            if let Some(tx) = &w.to_worker {
-                let _ = tx.send(Control::Cancel);
-            }
+            cancel_worker(&mut w);
         } else {
             // A rigid move keeps what it does not touch; the worker rebuilds if it is not one.
             let edit = Edit {
@@ -789,7 +840,9 @@ pub fn drive_bake(world: &mut World) {
         let lights = changes.lights.then(|| scene.lights.clone());
         if !scene.has_emitters() {
             stop(world);
-            world.resource_mut::<BakeStatus>().phase = BakePhase::NoEmitters;
+            let mut s = world.resource_mut::<BakeStatus>();
+            s.phase = BakePhase::NoEmitters;
+            s.stale = false;
             world.insert_resource(BakedLighting::default());
             return;
         }
@@ -833,7 +886,7 @@ pub fn drive_bake(world: &mut World) {
         s.phase = BakePhase::Building;
         s.progress = 0.0;
         s.error = None;
-    } else if let Some((bake, _)) = w.idle.take() {
+    } else if let Some((bake, bake_epoch)) = w.idle.take() {
         let edit = w.edit.take();
         let resuming = world.resource::<BakeStatus>().phase == BakePhase::Paused;
         let mut w = world.resource_mut::<BakeWorker>();
@@ -841,7 +894,7 @@ pub fn drive_bake(world: &mut World) {
             spawn(&mut w, &settings, Start::Continue(bake, edit));
             world.resource_mut::<BakeStatus>().phase = BakePhase::Solving;
         } else {
-            w.idle = Some((bake, w.epoch));
+            w.idle = Some((bake, bake_epoch));
         }
     }
 }

@@ -18,7 +18,7 @@ use radiant_scene::Scene;
 
 use crate::app::{App, Plugin, PostUpdate};
 use crate::bake::{BakeSystems, BakedLighting};
-use crate::scene::{SceneCamera, gather_scene};
+use crate::scene::{SceneCamera, gather_render_scene};
 
 /// Bloom on the camera (see `radiant_post::bloom::Bloom` for the fields).
 #[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
@@ -133,26 +133,58 @@ impl Plugin for RenderPlugin {
 }
 
 /// Fills a light map made by `RenderScene::from_scene(scene, ..)` with the incident radiance
-/// `H = (B − E)/ρ` of the element under each texel, so that `albedo × H + E` reproduces `B`.
+/// `H = (B − E)/ρ̃` of the element under each texel, so that the renderer's `albedo × H + E`
+/// reproduces the baked `B`; `ρ̃` is the albedo as the 8-bit G-buffer stores it. Dynamic
+/// surfaces (not in the bake) get `H = 0`.
+///
+/// The bake's radiosity already holds the punctual lights' direct light, with shadows, so a
+/// frame drawn from this light map must not add the lights again: [`lit_by_bake`] removes them.
 pub fn fill_lightmap(rs: &mut RenderScene, scene: &Scene, mesh: &Mesh, radiosity: &[Rgb]) {
+    // Scene triangle → bake input triangle (the bake meshes the static part only).
+    let mut next = 0u32;
+    let to_root: Vec<Option<u32>> = scene
+        .triangles
+        .iter()
+        .map(|t| {
+            let dynamic = scene
+                .surfaces
+                .get(t.surface as usize)
+                .is_none_or(|s| s.dynamic);
+            (!dynamic).then(|| {
+                next += 1;
+                next - 1
+            })
+        })
+        .collect();
     rs.fill_lightmap(|t| {
-        let Some(tri) = scene.triangles.get(t.triangle) else {
+        let (Some(tri), Some(Some(root))) =
+            (scene.triangles.get(t.triangle), to_root.get(t.triangle))
+        else {
             return [0.0; 3];
         };
+        if *root as usize >= mesh.roots.len() {
+            return [0.0; 3];
+        }
         let surface = &scene.surfaces[tri.surface as usize];
-        let e = mesh.locate(t.triangle as u32, f64::from(t.u), f64::from(t.v));
+        let e = mesh.locate(*root, f64::from(t.u), f64::from(t.v));
         let Some(b) = radiosity.get(e as usize) else {
             return [0.0; 3];
         };
         [0, 1, 2].map(|c| {
-            let rho = surface.reflectance[c];
-            if rho > 1e-6 {
-                ((b[c] - surface.emission[c]) / rho).max(0.0) as f32
+            let stored = (surface.reflectance[c] * 255.0).round() / 255.0;
+            if stored > 0.0 {
+                ((b[c] - surface.emission[c]) / stored).clamp(0.0, 65504.0) as f32
             } else {
                 0.0
             }
         })
     });
+}
+
+/// Drops the punctual lights from a scene lit by a bake's light map: their direct light (with
+/// shadows) is in the map already, and drawing them too would count it twice.
+pub fn lit_by_bake(rs: &mut RenderScene) {
+    rs.lights.clear();
 }
 
 fn max_rel_change(a: &[Rgb], b: &[Rgb]) -> f64 {
@@ -195,14 +227,14 @@ pub fn extract_settings(world: &mut World) -> FrameSettings {
 }
 
 fn build_scene(world: &mut World, settings: &RenderSettings) -> Result<RenderScene, RenderError> {
-    let scene = gather_scene(world);
+    let scene = gather_render_scene(world);
     let lit = world.resource::<BakedLighting>().clone();
     let mut rs = RenderScene::from_scene(&scene, settings.lightmap_cell)?;
     if let Some(mesh) = &lit.mesh
-        && mesh.roots.len() == scene.triangles.len()
         && !lit.radiosity.is_empty()
     {
         fill_lightmap(&mut rs, &scene, mesh, &lit.radiosity);
+        lit_by_bake(&mut rs);
     }
     world.resource_mut::<RenderState>().scene = Some(Arc::new(scene));
     Ok(rs)
@@ -222,7 +254,7 @@ pub fn render_frame(world: &mut World) {
             world.resource::<crate::bake::BakeStatus>().phase == crate::bake::BakePhase::Converged;
         (lit.generation, lit.radiosity.clone(), converged)
     };
-    let gathered = gather_scene(world);
+    let gathered = gather_render_scene(world);
     let result = world.resource_scope(|world, gpu: Mut<Gpu>| -> Result<(), RenderError> {
         let state = world.resource::<RenderState>();
         let scene_changed = state.scene.as_deref() != Some(&gathered);

@@ -147,7 +147,12 @@ pub fn spawn_scene(world: &mut World, scene: &Scene) -> Entity {
         ));
     }
     if let Some(c) = scene.camera {
-        world.spawn((Name::new("camera"), SceneCamera(c), ChildOf(root)));
+        world.spawn((
+            Name::new("camera"),
+            SceneCamera(c),
+            Transform::IDENTITY,
+            ChildOf(root),
+        ));
     }
     root
 }
@@ -175,19 +180,31 @@ pub fn propagate_transforms(
     }
 }
 
-/// The static surfaces, lights and camera as a radiosity scene, in world space.
+/// The static surfaces, lights and camera as a radiosity scene, in world space: what the
+/// bake sees.
 pub fn gather_scene(world: &mut World) -> Scene {
-    let mut q = world.query_filtered::<(
+    gather(world, false)
+}
+
+/// Every surface, static or not (dynamic ones marked `dynamic`), with the lights and camera:
+/// what the renderer draws.
+pub fn gather_render_scene(world: &mut World) -> Scene {
+    gather(world, true)
+}
+
+fn gather(world: &mut World, with_dynamic: bool) -> Scene {
+    let mut q = world.query::<(
         &SurfaceOrder,
         Option<&Name>,
         &Geometry,
         &Material,
         Option<&GlobalTransform>,
-    ), With<Static>>();
-    let mut rows: Vec<_> = q.iter(world).collect();
+        Has<Static>,
+    )>();
+    let mut rows: Vec<_> = q.iter(world).filter(|r| r.5 || with_dynamic).collect();
     rows.sort_by_key(|r| *r.0);
     let mut scene = Scene::default();
-    for (order, name, geometry, material, global) in rows {
+    for (order, name, geometry, material, global, is_static) in rows {
         let m = global.map_or(DAffine3::IDENTITY, |g| g.0);
         let surface = scene.surfaces.len() as u32;
         let name = name.map_or_else(|| format!("surface{}", order.0), |n| n.as_str().to_string());
@@ -196,7 +213,7 @@ pub fn gather_scene(world: &mut World) -> Scene {
             name,
             reflectance: material.reflectance,
             emission: material.emission,
-            dynamic: false,
+            dynamic: !is_static,
         });
         for t in &geometry.triangles {
             scene.triangles.push(Triangle {
@@ -215,7 +232,14 @@ pub fn gather_scene(world: &mut World) -> Scene {
             .normalize_or(light.direction);
         scene.lights.push(light);
     }
-    let mut cams = world.query::<&SceneCamera>();
-    scene.camera = cams.iter(world).next().map(|c| c.0);
+    let mut cams = world.query::<(&SceneCamera, Option<&GlobalTransform>)>();
+    scene.camera = cams.iter(world).next().map(|(c, g)| {
+        let m = g.map_or(DAffine3::IDENTITY, |g| g.0);
+        let mut cam = c.0;
+        cam.position = m.transform_point3(cam.position);
+        cam.forward = m.transform_vector3(cam.forward).normalize_or(cam.forward);
+        cam.up = m.transform_vector3(cam.up).normalize_or(cam.up);
+        cam
+    });
     scene
 }

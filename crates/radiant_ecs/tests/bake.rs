@@ -198,6 +198,13 @@ fn one_and_two_threads_give_identical_light() {
 #[test]
 fn pause_resume_and_cancel() {
     let mut app = cornell_app(None);
+    // Southwell to a tight tolerance takes thousands of steps (one shot each), so the pause
+    // lands mid-solve however fast the machine.
+    {
+        let mut bake = app.world.resource_mut::<RadiosityBake>();
+        bake.params.solver = SolverKind::Southwell;
+        bake.params.solver_params.tolerance = 1e-9;
+    }
     // Pause as soon as solving starts.
     app.run_until(100_000, Duration::from_millis(1), |w| {
         w.resource::<BakeStatus>().phase == BakePhase::Solving

@@ -334,7 +334,7 @@ fn direct(lights: &[Light], p: Vec3) -> f32 {
         let r = d.length();
         let cos = (d.z / r).max(0.0);
         let window = if l.range.is_finite() {
-            (1.0 - (r / l.range).powi(4)).clamp(0.0, 1.0).powi(2)
+            (1.0 - (r / l.range).powi(4)).clamp(0.0, 1.0)
         } else {
             1.0
         };

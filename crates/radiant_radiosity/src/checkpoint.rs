@@ -4,8 +4,8 @@
 //! Layout, little-endian: 16-byte magic and version; the fingerprint of the geometry, lights and
 //! every parameter the links depend on; element, node and link counts; row offsets (u64),
 //! sources (u32), form factors (f32), enclosed flags (u8), radiosity (3 × f64 per element);
-//! an FNV-1a checksum of all of it. Materials are not in the fingerprint: a checkpoint of the
-//! same geometry with other colours resumes as a material edit.
+//! an FNV-1a checksum of all of it. Materials and lights are not in the fingerprint: a
+//! checkpoint of the same geometry with other colours or lights resumes as an edit would.
 
 use std::io::Write;
 use std::path::Path;
@@ -52,8 +52,9 @@ impl Fnv {
     }
 }
 
-/// The fingerprint of what links depend on: geometry, lights (they feed the refinement
-/// estimate), and the mesh, link and form-factor parameters.
+/// The fingerprint of what links depend on: geometry and the mesh, link and form-factor
+/// parameters. Lights and materials are not in it: resuming computes direct light again and
+/// takes the scene's materials, as edits do.
 pub fn fingerprint(scene: &Scene, params: &BakeParams) -> u64 {
     let mut h = Fnv::new();
     h.bytes(
@@ -70,12 +71,6 @@ pub fn fingerprint(scene: &Scene, params: &BakeParams) -> u64 {
             h.f64(v.z);
         }
         h.bytes(&t.surface.to_le_bytes());
-    }
-    for l in &scene.lights {
-        h.bytes(format!("{:?}", l.kind).as_bytes());
-        for x in [l.position.x, l.position.y, l.position.z, l.intensity] {
-            h.f64(x);
-        }
     }
     h.0
 }
@@ -114,7 +109,12 @@ pub fn write(
     let mut h = Fnv::new();
     h.bytes(&buf);
     buf.extend_from_slice(&h.0.to_le_bytes());
-    let tmp = path.with_extension("tmp");
+    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n_tmp = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let name = path
+        .file_name()
+        .map_or_else(|| "checkpoint".into(), |n| n.to_string_lossy().into_owned());
+    let tmp = path.with_file_name(format!(".{name}.tmp.{}.{n_tmp}", std::process::id()));
     {
         let mut f = std::fs::File::create(&tmp).map_err(io)?;
         f.write_all(&buf).map_err(io)?;

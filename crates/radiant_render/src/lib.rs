@@ -92,6 +92,9 @@ pub enum RenderError {
         /// The valid range.
         range: &'static str,
     },
+    /// The scene is inconsistent (a triangle naming a missing surface, say).
+    #[error("invalid scene: {0}")]
+    InvalidScene(String),
     /// The scene has no triangles.
     #[error("the scene has no triangles to draw")]
     EmptyScene,

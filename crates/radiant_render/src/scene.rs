@@ -101,6 +101,10 @@ impl CameraView {
     }
 }
 
+/// The largest light-map side [`RenderScene::from_scene`] makes (the WebGPU minimum of
+/// `max_texture_dimension_2d` is 8192).
+pub const MAX_LIGHTMAP_SIDE: u32 = 8192;
+
 /// A light map: incident radiance-weighted irradiance per texel (`H`, the bake's units: a
 /// surface of albedo `a` reflects radiance `a · H`), linear RGB.
 #[derive(Clone, Debug, PartialEq)]
@@ -163,11 +167,34 @@ impl RenderScene {
                 hi = hi.max(v);
             }
         }
+        if let Some(t) = scene
+            .triangles
+            .iter()
+            .find(|t| t.surface as usize >= scene.surfaces.len())
+        {
+            return Err(RenderError::InvalidScene(format!(
+                "a triangle names surface {} of {}",
+                t.surface,
+                scene.surfaces.len()
+            )));
+        }
+        if !(lo.is_finite() && hi.is_finite()) {
+            return Err(RenderError::NonFinite("vertex data"));
+        }
         let origin = (lo + hi) * 0.5;
-        let n = scene.triangles.len() as u32;
-        let cols = (f64::from(n).sqrt().ceil() as u32).max(1);
+        // Sizes in u64, checked before anything is allocated.
+        let n = scene.triangles.len() as u64;
+        let cols = ((n as f64).sqrt().ceil() as u64).max(1);
         let rows = n.div_ceil(cols);
-        let (w, h) = (cols * cell, rows * cell);
+        let (w64, h64) = (cols * u64::from(cell), rows * u64::from(cell));
+        if w64 > u64::from(MAX_LIGHTMAP_SIDE) || h64 > u64::from(MAX_LIGHTMAP_SIDE) {
+            return Err(RenderError::InvalidSize {
+                width: w64.min(u64::from(u32::MAX)) as u32,
+                height: h64.min(u64::from(u32::MAX)) as u32,
+                max: MAX_LIGHTMAP_SIDE,
+            });
+        }
+        let (cols, w, h) = (cols as u32, w64 as u32, h64 as u32);
         let mut vertices = Vec::with_capacity(scene.triangles.len() * 3);
         for (i, t) in scene.triangles.iter().enumerate() {
             let s = &scene.surfaces[t.surface as usize];
@@ -192,14 +219,15 @@ impl RenderScene {
                 });
             }
         }
+        let diag = (hi - lo).length().max(1e-6);
         let camera = scene.camera.map_or(
             CameraView {
-                position: origin + DVec3::new(0.0, 0.0, (hi - lo).length() * 1.5),
+                position: origin + DVec3::new(0.0, 0.0, diag * 1.5),
                 forward: Vec3::NEG_Z,
                 up: Vec3::Y,
                 yfov: 0.7,
-                near: 0.01,
-                far: 100.0,
+                near: (diag * 1e-3) as f32,
+                far: (diag * 4.0).max(1.0) as f32,
             },
             |c| CameraView {
                 position: c.position,
@@ -253,6 +281,9 @@ impl RenderScene {
         let Some(lm) = self.lightmap.as_mut() else {
             return;
         };
+        if lm.texels.len() as u64 != u64::from(lm.width) * u64::from(lm.height) {
+            return;
+        }
         let (w, hgt) = (lm.width as f32, lm.height as f32);
         for (index, tri) in self.vertices.chunks_exact(3).enumerate() {
             let uv = [&tri[0], &tri[1], &tri[2]]
@@ -447,6 +478,13 @@ impl GpuScene {
         });
         let mut lights: Vec<GpuLight> = Vec::with_capacity(scene.lights.len().max(1));
         for l in &scene.lights {
+            if l.range.is_nan() {
+                return Err(RenderError::NonFinite("light"));
+            }
+            if l.range <= 0.0 {
+                // A non-positive range reaches nothing, as in the bake.
+                continue;
+            }
             let p = (l.position - scene.origin).as_vec3();
             let c = l.color * l.intensity;
             if !(p.is_finite() && c.is_finite() && l.direction.is_finite()) || l.intensity < 0.0 {
@@ -488,7 +526,11 @@ impl GpuScene {
             usage: wgpu::BufferUsages::STORAGE,
         });
         let (lw, lh, data): (u32, u32, Vec<u16>) = match &scene.lightmap {
-            Some(lm) if lm.texels.len() == (lm.width * lm.height) as usize && lm.width > 0 => {
+            Some(lm)
+                if lm.width > 0
+                    && lm.height > 0
+                    && lm.texels.len() as u64 == u64::from(lm.width) * u64::from(lm.height) =>
+            {
                 if lm.texels.iter().flatten().any(|x| !x.is_finite()) {
                     return Err(RenderError::NonFinite("light map"));
                 }

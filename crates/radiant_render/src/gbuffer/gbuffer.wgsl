@@ -51,7 +51,7 @@ fn gbuffer_fs(in: VertexOut, @builtin(front_facing) front: bool) -> GBufferOut {
     var out: GBufferOut;
     out.albedo = vec4<f32>(in.albedo, 1.0);
     out.normal = oct_encode(n);
-    // r: roughness (Lambertian: 1), g: 1 where a light map covers the surface.
+    // r: roughness (Lambertian: 1), g: light-map coverage (every surface has a chart: 1).
     out.material = vec2<f32>(1.0, 1.0);
     out.irradiance = vec4<f32>(textureSampleLevel(lightmap, lightmap_sampler, in.lightmap_uv, 0.0).rgb, 1.0);
     out.emissive = vec4<f32>(in.emissive, 1.0);

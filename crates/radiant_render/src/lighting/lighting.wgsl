@@ -42,13 +42,14 @@ var<workgroup> tile_max: atomic<u32>;
 var<workgroup> tile_count: atomic<u32>;
 var<workgroup> tile_lights: array<u32, 256>;
 
+// KHR_lights_punctual's recommended cutoff, clamp(1 - (d / range)^4, 0, 1), as the bake uses;
+// range 0 here means none (lights with a non-positive range are not uploaded).
 fn range_window(d: f32, range: f32) -> f32 {
     if (range <= 0.0) {
         return 1.0;
     }
     let r = d / range;
-    let w = clamp(1.0 - r * r * r * r, 0.0, 1.0);
-    return w * w;
+    return clamp(1.0 - r * r * r * r, 0.0, 1.0);
 }
 
 fn light_irradiance(l: Light, p: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
