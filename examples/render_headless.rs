@@ -149,7 +149,13 @@ fn main() -> anyhow::Result<()> {
     println!("wrote {}/frame.png and frame.exr", args.out.display());
 
     if args.timings > 0 {
-        let target = gpu.device.create_texture(&wgpu_target(w, h));
+        let target = radiant::render::util::target_texture(
+            &gpu.device,
+            "timing_target",
+            w,
+            h,
+            wgpu_format(),
+        );
         let view = target.create_view(&Default::default());
         let format = wgpu_format();
         let mut runs: Vec<Vec<(&'static str, f64)>> = Vec::new();
@@ -229,22 +235,4 @@ fn main() -> anyhow::Result<()> {
 
 fn wgpu_format() -> radiant::render::wgpu::TextureFormat {
     radiant::render::wgpu::TextureFormat::Rgba8UnormSrgb
-}
-
-fn wgpu_target(w: u32, h: u32) -> radiant::render::wgpu::TextureDescriptor<'static> {
-    use radiant::render::wgpu;
-    wgpu::TextureDescriptor {
-        label: Some("timing_target"),
-        size: wgpu::Extent3d {
-            width: w,
-            height: h,
-            depth_or_array_layers: 1,
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: wgpu::TextureFormat::Rgba8UnormSrgb,
-        usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-        view_formats: &[],
-    }
 }

@@ -273,22 +273,13 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
 
     let mut timings = serde_json::Value::Null;
     if args.timings > 0 {
-        let target = gpu
-            .device
-            .create_texture(&radiant::render::wgpu::TextureDescriptor {
-                label: Some("timing_target"),
-                size: radiant::render::wgpu::Extent3d {
-                    width: w,
-                    height: h,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: radiant::render::wgpu::TextureDimension::D2,
-                format: radiant::render::wgpu::TextureFormat::Rgba8UnormSrgb,
-                usage: radiant::render::wgpu::TextureUsages::RENDER_ATTACHMENT,
-                view_formats: &[],
-            });
+        let target = radiant::render::util::target_texture(
+            &gpu.device,
+            "timing_target",
+            w,
+            h,
+            radiant::render::wgpu::TextureFormat::Rgba8UnormSrgb,
+        );
         let view = target.create_view(&Default::default());
         let mut runs = Vec::new();
         let mut gpu_clock = false;

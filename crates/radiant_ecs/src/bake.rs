@@ -715,6 +715,15 @@ fn stop(world: &mut World) {
     w.edit = None;
 }
 
+/// Nothing emits: drop any bake and its light.
+fn no_emitters(world: &mut World) {
+    stop(world);
+    let mut s = world.resource_mut::<BakeStatus>();
+    s.phase = BakePhase::NoEmitters;
+    s.stale = false;
+    world.insert_resource(BakedLighting::default());
+}
+
 /// A worker that stopped behind the world's epoch missed an edit sent as it was stopping:
 /// queue the current scene as an edit, so the next start applies it.
 fn requeue_lost_edit(world: &mut World, epoch: u64) {
@@ -805,11 +814,7 @@ pub fn drive_bake(world: &mut World) {
             return;
         }
         if !scene.has_emitters() {
-            stop(world);
-            let mut s = world.resource_mut::<BakeStatus>();
-            s.phase = BakePhase::NoEmitters;
-            s.stale = false;
-            world.insert_resource(BakedLighting::default());
+            no_emitters(world);
             return;
         }
         let mut w = world.resource_mut::<BakeWorker>();
@@ -839,11 +844,7 @@ pub fn drive_bake(world: &mut World) {
         let scene = gather_scene(world);
         let lights = changes.lights.then(|| scene.lights.clone());
         if !scene.has_emitters() {
-            stop(world);
-            let mut s = world.resource_mut::<BakeStatus>();
-            s.phase = BakePhase::NoEmitters;
-            s.stale = false;
-            world.insert_resource(BakedLighting::default());
+            no_emitters(world);
             return;
         }
         let mut w = world.resource_mut::<BakeWorker>();

@@ -301,20 +301,13 @@ pub fn render_frame(world: &mut World) {
                         max,
                     });
                 }
-                let tex = gpu.0.device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some("ecs_frame_target"),
-                    size: wgpu::Extent3d {
-                        width: w,
-                        height: h,
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
+                let tex = radiant_render::util::target_texture(
+                    &gpu.0.device,
+                    "ecs_frame_target",
+                    w,
+                    h,
                     format,
-                    usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-                    view_formats: &[],
-                });
+                );
                 state.target = Some((w, h, tex));
             }
             let state = &mut *state;

@@ -413,20 +413,13 @@ impl FrameRenderer {
         if width == 0 || height == 0 || width > max || height > max {
             return Err(RenderError::InvalidSize { width, height, max });
         }
-        let target = gpu.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("capture_target"),
-            size: wgpu::Extent3d {
-                width,
-                height,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
+        let target = radiant_render::util::target_texture(
+            &gpu.device,
+            "capture_target",
+            width,
+            height,
             format,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
+        );
         let view = target.create_view(&Default::default());
         self.render(gpu, &view, width, height, format, settings)?;
         gpu.take_errors()?;

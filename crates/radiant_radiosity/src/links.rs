@@ -147,6 +147,11 @@ pub fn build(
             (counts, src, ff)
         })
         .collect();
+    assemble(n, chunks)
+}
+
+/// Concatenates per-chunk rows (link counts per element, sources, form factors) into links.
+fn assemble(n: usize, chunks: Vec<(Vec<u32>, Vec<u32>, Vec<f32>)>) -> Links {
     let total: usize = chunks.iter().map(|c| c.1.len()).sum();
     let mut links = Links {
         row: Vec::with_capacity(n + 1),
@@ -397,26 +402,16 @@ pub fn update(
             (counts, src, ff, stats)
         })
         .collect();
-    let total: usize = chunks.iter().map(|c| c.1.len()).sum();
-    let mut links = Links {
-        row: Vec::with_capacity(n + 1),
-        src: Vec::with_capacity(total),
-        ff: Vec::with_capacity(total),
-    };
     let mut stats = UpdateStats::default();
-    links.row.push(0);
-    for (counts, src, ff, s) in chunks {
-        let mut at = links.src.len();
-        for c in counts {
-            at += c as usize;
-            links.row.push(at);
-        }
-        links.src.extend(src);
-        links.ff.extend(ff);
-        stats.recomputed += s.recomputed;
-        stats.kept += s.kept;
-    }
-    (links, stats)
+    let rows = chunks
+        .into_iter()
+        .map(|(counts, src, ff, s)| {
+            stats.recomputed += s.recomputed;
+            stats.kept += s.kept;
+            (counts, src, ff)
+        })
+        .collect();
+    (assemble(n, rows), stats)
 }
 
 #[cfg(test)]
