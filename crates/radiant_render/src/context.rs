@@ -44,10 +44,25 @@ pub struct GpuContext {
 
 impl GpuContext {
     /// A context with no window, for offscreen rendering and tests.
+    ///
+    /// Without `WGPU_BACKEND`, the primary backends (Vulkan, Metal, DX12) are tried first and
+    /// the GL fallback only when they have no adapter, so machines without GL drivers log no
+    /// GL errors.
     pub fn headless() -> Result<Self, RenderError> {
-        let instance =
-            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        pollster::block_on(Self::from_instance(instance, None))
+        let from_env = std::env::var_os("WGPU_BACKEND").is_some();
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        if !from_env {
+            desc.backends = wgpu::Backends::PRIMARY;
+        }
+        match pollster::block_on(Self::from_instance(wgpu::Instance::new(desc), None)) {
+            Err(RenderError::NoAdapter) if !from_env => {
+                let instance = wgpu::Instance::new(
+                    wgpu::InstanceDescriptor::new_without_display_handle_from_env(),
+                );
+                pollster::block_on(Self::from_instance(instance, None))
+            }
+            other => other,
+        }
     }
 
     /// A context on `instance` whose adapter can present to `surface`, if one is given.
