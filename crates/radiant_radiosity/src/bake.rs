@@ -308,7 +308,7 @@ impl Bake {
             && sv.fingerprint != fingerprint
         {
             return Err(BakeError::Checkpoint(
-                "it was written for other geometry, lights or bake parameters".into(),
+                "it was written for other geometry or bake parameters".into(),
             ));
         }
         let mesh = Mesh::new(scene, &params.mesh)?;
@@ -358,6 +358,16 @@ impl Bake {
             Some(sv) => (Some((sv.links, sv.dead)), Some(sv.radiosity)),
             None => (None, None),
         };
+        if has_emitters
+            && saved_links
+                .as_ref()
+                .is_some_and(|(l, _)| l.is_empty() && n > 0)
+        {
+            // Written when nothing emitted, so it has no links to resume from.
+            return Err(BakeError::Checkpoint(
+                "it was written when nothing emitted and holds no links".into(),
+            ));
+        }
         let resumed = saved_links.is_some();
         let (links, dead) = if let Some((links, dead)) = saved_links {
             (links, dead)

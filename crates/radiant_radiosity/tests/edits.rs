@@ -196,6 +196,20 @@ fn a_checkpoint_resumes_without_form_factors_and_refuses_other_scenes() {
     // Other colours: resumed, as an edit.
     let recoloured = edited(&scene, false);
     assert!(Bake::resume(&recoloured, &p, &path).is_ok());
+    // A checkpoint of a dark scene has no links: not resumed once something emits.
+    let mut dark = scene.clone();
+    for s in &mut dark.surfaces {
+        s.emission = [0.0; 3];
+    }
+    let dark_path = dir.join("dark.ckpt");
+    Bake::new(&dark, &p)
+        .expect("bake")
+        .write_checkpoint(&dark_path)
+        .expect("write");
+    assert!(matches!(
+        Bake::resume(&scene, &p, &dark_path),
+        Err(BakeError::Checkpoint(_))
+    ));
     // Damaged or truncated files: typed errors, never a panic.
     let bytes = std::fs::read(&path).expect("read");
     let mut flipped = bytes.clone();
