@@ -26,8 +26,10 @@ if ! command -v cc >/dev/null 2>&1; then
 fi
 
 have_vulkan() {
-  { ls /usr/share/vulkan/icd.d/*.json /etc/vulkan/icd.d/*.json >/dev/null 2>&1; } &&
-    { ldconfig -p 2>/dev/null | grep -q 'libvulkan\.so\.1'; }
+  { compgen -G '/usr/share/vulkan/icd.d/*.json' >/dev/null ||
+    compgen -G '/etc/vulkan/icd.d/*.json' >/dev/null; } &&
+    # No `grep -q`: it would close the pipe early, and pipefail would count that as failure.
+    { ldconfig -p 2>/dev/null | grep 'libvulkan\.so\.1' >/dev/null; }
 }
 if ! have_vulkan; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
