@@ -276,7 +276,8 @@ pub fn compare_images(a: &Image, reference: &Image, block: u32) -> Option<ImageE
     };
     let (x, y) = (rgb(a), rgb(reference));
     let blocks = |v: &[[f64; 3]]| -> Vec<[f64; 3]> {
-        let b = block.max(1);
+        // A block larger than the image is the whole image.
+        let b = block.clamp(1, a.width.min(a.height));
         let (bw, bh) = (a.width / b, a.height / b);
         let mut out = vec![[0.0; 3]; (bw * bh) as usize];
         for j in 0..bh * b {
@@ -335,5 +336,7 @@ mod tests {
             texels: vec![[1.0; 4]; 4],
         };
         assert!(compare_images(&small, &img(1.0), 2).is_none());
+        let e = compare_images(&img(1.1), &img(1.0), 64).expect("same size");
+        assert!((e.rel_l1_blocks - 0.1).abs() < 1e-6, "{e:?}");
     }
 }

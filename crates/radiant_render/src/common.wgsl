@@ -33,7 +33,12 @@ fn oct_wrap(v: vec2<f32>) -> vec2<f32> {
 }
 
 fn oct_encode(n: vec3<f32>) -> vec2<f32> {
-    var p = n.xy / (abs(n.x) + abs(n.y) + abs(n.z));
+    let l1 = abs(n.x) + abs(n.y) + abs(n.z);
+    if (l1 < 1e-20) {
+        // A zero normal (degenerate input) encodes +z rather than NaN.
+        return vec2<f32>(0.0);
+    }
+    var p = n.xy / l1;
     if (n.z < 0.0) {
         p = oct_wrap(p);
     }

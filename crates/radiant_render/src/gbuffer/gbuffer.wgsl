@@ -44,7 +44,8 @@ struct GBufferOut {
 
 @fragment
 fn gbuffer_fs(in: VertexOut, @builtin(front_facing) front: bool) -> GBufferOut {
-    var n = normalize(in.normal);
+    let len = length(in.normal);
+    var n = select(vec3<f32>(0.0, 0.0, 1.0), in.normal / len, len > 1e-20);
     if (!front) {
         n = -n;
     }
