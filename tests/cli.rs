@@ -2,17 +2,9 @@
 //! clear line and a non-zero exit code.
 
 use std::path::PathBuf;
-use std::process::Command;
 
-fn radiant() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_radiant"))
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("radiant-cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
-}
+mod common;
+use common::{radiant, tmp};
 
 #[test]
 fn bake_writes_every_output() {

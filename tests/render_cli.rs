@@ -3,17 +3,9 @@
 #![cfg(feature = "render")]
 
 use std::path::PathBuf;
-use std::process::Command;
 
-fn radiant() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_radiant"))
-}
-
-fn tmp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("radiant-render-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
-}
+mod common;
+use common::{radiant, tmp};
 
 #[test]
 fn render_writes_a_tone_mapped_png_a_linear_exr_and_a_report() {

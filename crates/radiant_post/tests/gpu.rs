@@ -264,23 +264,7 @@ fn ssao_leaves_a_plane_facing_the_camera_unoccluded() {
 #[test]
 fn ssao_darkens_an_inside_corner_and_only_near_it() {
     let gpu = gpu();
-    let mut v = Vec::new();
-    // Floor y = -0.5 and back wall z = -1, meeting in a concave edge.
-    quad(
-        &mut v,
-        Vec3::new(-3.0, -0.5, 3.0),
-        Vec3::new(6.0, 0.0, 0.0),
-        Vec3::new(0.0, 0.0, -4.0),
-        [0.5; 3],
-    );
-    quad(
-        &mut v,
-        Vec3::new(-3.0, -0.5, -1.0),
-        Vec3::new(6.0, 0.0, 0.0),
-        Vec3::new(0.0, 4.0, 0.0),
-        [0.5; 3],
-    );
-    let s = scene(v, Vec3::new(0.0, 0.6, 1.5), Vec3::new(0.0, -0.5, -1.0), 1.0);
+    let s = corner_scene(0.5);
     let (w, h) = (128u32, 128u32);
     let mut frame = FrameRenderer::new(&gpu, &s).expect("renderer");
     let c = frame.capture(&gpu, w, h, &ao_settings()).expect("capture");
@@ -310,6 +294,27 @@ fn ssao_darkens_an_inside_corner_and_only_near_it() {
         floor > 0.97 && wall > 0.97,
         "open areas occluded: {floor}, {wall}"
     );
+}
+
+/// Floor y = -0.5 and back wall z = -1, meeting in a concave edge, seen from above and in
+/// front, with a constant light map of 1.
+fn corner_scene(albedo: f32) -> RenderScene {
+    let mut v = Vec::new();
+    quad(
+        &mut v,
+        Vec3::new(-3.0, -0.5, 3.0),
+        Vec3::new(6.0, 0.0, 0.0),
+        Vec3::new(0.0, 0.0, -4.0),
+        [albedo; 3],
+    );
+    quad(
+        &mut v,
+        Vec3::new(-3.0, -0.5, -1.0),
+        Vec3::new(6.0, 0.0, 0.0),
+        Vec3::new(0.0, 4.0, 0.0),
+        [albedo; 3],
+    );
+    scene(v, Vec3::new(0.0, 0.6, 1.5), Vec3::new(0.0, -0.5, -1.0), 1.0)
 }
 
 fn plane_scene(lights: Vec<Light>) -> RenderScene {
@@ -715,22 +720,7 @@ fn spot_and_directional_lights_match_their_closed_forms() {
 #[test]
 fn ssao_darkens_the_light_map_term_only() {
     let gpu = gpu();
-    let mut v = Vec::new();
-    quad(
-        &mut v,
-        Vec3::new(-3.0, -0.5, 3.0),
-        Vec3::new(6.0, 0.0, 0.0),
-        Vec3::new(0.0, 0.0, -4.0),
-        [ALBEDO; 3],
-    );
-    quad(
-        &mut v,
-        Vec3::new(-3.0, -0.5, -1.0),
-        Vec3::new(6.0, 0.0, 0.0),
-        Vec3::new(0.0, 4.0, 0.0),
-        [ALBEDO; 3],
-    );
-    let mut s = scene(v, Vec3::new(0.0, 0.6, 1.5), Vec3::new(0.0, -0.5, -1.0), 1.0);
+    let mut s = corner_scene(ALBEDO);
     s.lights.push(Light {
         kind: LightKind::Point,
         position: DVec3::new(0.0, 0.5, 0.0),
@@ -776,22 +766,7 @@ fn ssao_darkens_the_light_map_term_only() {
 #[test]
 fn sobel_on_normals_finds_the_crease_and_nothing_on_flat_ground() {
     let gpu = gpu();
-    let mut v = Vec::new();
-    quad(
-        &mut v,
-        Vec3::new(-3.0, -0.5, 3.0),
-        Vec3::new(6.0, 0.0, 0.0),
-        Vec3::new(0.0, 0.0, -4.0),
-        [ALBEDO; 3],
-    );
-    quad(
-        &mut v,
-        Vec3::new(-3.0, -0.5, -1.0),
-        Vec3::new(6.0, 0.0, 0.0),
-        Vec3::new(0.0, 4.0, 0.0),
-        [ALBEDO; 3],
-    );
-    let s = scene(v, Vec3::new(0.0, 0.6, 1.5), Vec3::new(0.0, -0.5, -1.0), 1.0);
+    let s = corner_scene(ALBEDO);
     let mut frame = FrameRenderer::new(&gpu, &s).expect("renderer");
     let settings = FrameSettings {
         sobel: Some(Sobel {

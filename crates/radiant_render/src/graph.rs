@@ -554,6 +554,25 @@ impl CompiledGraph {
         self.plan.slot(handle).map(|s| &self.textures[s])
     }
 
+    /// Encodes live pass `p`.
+    fn run_pass(
+        &self,
+        p: usize,
+        gpu: &GpuContext,
+        encoder: &mut wgpu::CommandEncoder,
+        views: &[Option<&wgpu::TextureView>],
+        descs: &[TextureDesc],
+    ) {
+        let mut ctx = PassContext {
+            device: &gpu.device,
+            queue: &gpu.queue,
+            encoder,
+            views,
+            descs,
+        };
+        (self.plan.passes[p].run)(&mut ctx);
+    }
+
     fn resolve<'a>(
         &'a self,
         imports: &[&'a wgpu::TextureView],
@@ -593,14 +612,7 @@ impl CompiledGraph {
                 label: Some("render_graph"),
             });
         for &p in &self.plan.order {
-            let mut ctx = PassContext {
-                device: &gpu.device,
-                queue: &gpu.queue,
-                encoder: &mut encoder,
-                views: &views,
-                descs: &descs,
-            };
-            (self.plan.passes[p].run)(&mut ctx);
+            self.run_pass(p, gpu, &mut encoder, &views, &descs);
         }
         gpu.queue.submit([encoder.finish()]);
         Ok(())
@@ -642,14 +654,7 @@ impl CompiledGraph {
                 });
             encoder.write_timestamp(&qs, 0);
             for (i, &p) in self.plan.order.iter().enumerate() {
-                let mut ctx = PassContext {
-                    device: &gpu.device,
-                    queue: &gpu.queue,
-                    encoder: &mut encoder,
-                    views: &views,
-                    descs: &descs,
-                };
-                (self.plan.passes[p].run)(&mut ctx);
+                self.run_pass(p, gpu, &mut encoder, &views, &descs);
                 encoder.write_timestamp(&qs, i as u32 + 1);
             }
             encoder.resolve_query_set(&qs, 0..n + 1, &resolve, 0);
@@ -681,14 +686,7 @@ impl CompiledGraph {
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("render_graph_pass"),
                 });
-            let mut ctx = PassContext {
-                device: &gpu.device,
-                queue: &gpu.queue,
-                encoder: &mut encoder,
-                views: &views,
-                descs: &descs,
-            };
-            (self.plan.passes[p].run)(&mut ctx);
+            self.run_pass(p, gpu, &mut encoder, &views, &descs);
             gpu.queue.submit([encoder.finish()]);
             let _ = gpu.device.poll(wgpu::PollType::wait_indefinitely());
             passes.push((self.plan.passes[p].name, t0.elapsed().as_secs_f64() * 1e3));
