@@ -12,7 +12,7 @@ use bevy_ecs::prelude::*;
 use radiant_post::frame::{FrameRenderer, FrameSettings};
 use radiant_radiosity::{Mesh, Rgb};
 use radiant_render::capture::Image;
-use radiant_render::scene::RenderScene;
+use radiant_render::scene::{CameraView, RenderScene};
 use radiant_render::{GpuContext, RenderError};
 use radiant_scene::Scene;
 
@@ -51,6 +51,9 @@ pub struct RenderSettings {
     pub visible_change: f64,
     /// Read every frame back into [`LastFrame`] (default: false; tests and tools turn it on).
     pub capture: bool,
+    /// Draw a frame offscreen every update (default: true). A window turns it off and draws
+    /// into its surface with [`render_to`]; the renderer is still kept up to date.
+    pub offscreen: bool,
 }
 
 impl Default for RenderSettings {
@@ -60,6 +63,7 @@ impl Default for RenderSettings {
             lightmap_cell: 32,
             visible_change: 0.002,
             capture: false,
+            offscreen: true,
         }
     }
 }
@@ -84,6 +88,9 @@ pub struct RenderState {
     pub settings: Option<FrameSettings>,
     /// The last error, if rendering failed.
     pub error: Option<String>,
+    /// The last measured pass times ([`render_to`] with `timed`).
+    pub timings: Option<radiant_render::graph::PassTimings>,
+    pending_overlay: Option<Option<Arc<dyn radiant_post::overlay::Overlay>>>,
 }
 
 impl RenderState {
@@ -115,8 +122,14 @@ impl Plugin for RenderPlugin {
         app.init_resource::<RenderSettings>()
             .init_resource::<RenderState>()
             .init_resource::<LastFrame>()
+            .init_resource::<RenderChanges>()
             .configure_sets(PostUpdate, RenderSystems.after(BakeSystems))
-            .add_systems(PostUpdate, render_frame.in_set(RenderSystems));
+            .add_systems(
+                PostUpdate,
+                (detect_render_changes, render_frame)
+                    .chain()
+                    .in_set(RenderSystems),
+            );
     }
 
     fn finish(&self, app: &mut App) {
@@ -240,36 +253,131 @@ fn build_scene(world: &mut World, settings: &RenderSettings) -> Result<RenderSce
     Ok(rs)
 }
 
-/// Uploads a new light map when the bake published a visibly different one (or the scene
-/// changed), then renders one frame offscreen. Exclusive: it gathers the scene.
-pub fn render_frame(world: &mut World) {
+/// What changed since the renderer last looked (Bevy change detection, no gathering).
+#[derive(Resource, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RenderChanges {
+    /// Geometry, materials, transforms or lights: the scene is gathered and uploaded again.
+    pub scene: bool,
+    /// Only the camera moved: one uniform is written.
+    pub camera: bool,
+}
+
+impl Default for RenderChanges {
+    fn default() -> Self {
+        // The first frame gathers the scene.
+        Self {
+            scene: true,
+            camera: true,
+        }
+    }
+}
+
+/// Notes what the renderer must upload: any drawn surface or light changed, appeared or went,
+/// or only the camera moved.
+#[expect(clippy::type_complexity, reason = "change-detection filters")]
+pub fn detect_render_changes(
+    surfaces: Query<
+        (),
+        (
+            With<crate::scene::Geometry>,
+            Or<(
+                Changed<crate::scene::Geometry>,
+                Changed<crate::scene::Material>,
+                Changed<crate::scene::GlobalTransform>,
+                Added<crate::scene::Static>,
+            )>,
+        ),
+    >,
+    lights: Query<
+        (),
+        (
+            With<crate::scene::PunctualLight>,
+            Or<(
+                Changed<crate::scene::PunctualLight>,
+                Changed<crate::scene::GlobalTransform>,
+            )>,
+        ),
+    >,
+    cameras: Query<
+        (),
+        (
+            With<SceneCamera>,
+            Or<(Changed<SceneCamera>, Changed<crate::scene::GlobalTransform>)>,
+        ),
+    >,
+    mut removed_geometry: RemovedComponents<crate::scene::Geometry>,
+    mut removed_static: RemovedComponents<crate::scene::Static>,
+    mut removed_lights: RemovedComponents<crate::scene::PunctualLight>,
+    mut changes: ResMut<RenderChanges>,
+) {
+    let removed = removed_geometry.read().count()
+        + removed_static.read().count()
+        + removed_lights.read().count();
+    if !surfaces.is_empty() || !lights.is_empty() || removed > 0 {
+        changes.scene = true;
+    }
+    if !cameras.is_empty() {
+        changes.camera = true;
+    }
+}
+
+/// The scene camera as the renderer sees it, with the clip planes of `fallback` (they come
+/// from the scene's bounds when it was uploaded).
+fn camera_view(world: &mut World, fallback: CameraView) -> CameraView {
+    let mut q = world.query::<(&SceneCamera, Option<&crate::scene::GlobalTransform>)>();
+    let Some((c, g)) = q.iter(world).next() else {
+        return fallback;
+    };
+    let m = g.map_or(glam::DAffine3::IDENTITY, |g| g.0);
+    CameraView {
+        position: m.transform_point3(c.0.position),
+        forward: m
+            .transform_vector3(c.0.forward)
+            .normalize_or(c.0.forward)
+            .as_vec3(),
+        up: m.transform_vector3(c.0.up).normalize_or(c.0.up).as_vec3(),
+        yfov: c.0.yfov as f32,
+        ..fallback
+    }
+}
+
+/// Brings the renderer up to date: uploads the scene when it changed (found by change
+/// detection, not by gathering), a new light map when the bake published a visibly different
+/// one, and otherwise at most the camera. `Ok(false)`: nothing to draw yet (no GPU, or an empty
+/// world).
+pub fn prepare_frame(world: &mut World) -> Result<bool, RenderError> {
     if !world.contains_resource::<Gpu>() {
-        return;
+        return Ok(false);
     }
     let settings = *world.resource::<RenderSettings>();
-    let frame_settings = extract_settings(world);
+    let changes = std::mem::replace(
+        &mut *world.resource_mut::<RenderChanges>(),
+        RenderChanges {
+            scene: false,
+            camera: false,
+        },
+    );
     let (generation, light, converged) = {
         let lit = world.resource::<BakedLighting>();
         let converged =
             world.resource::<crate::bake::BakeStatus>().phase == crate::bake::BakePhase::Converged;
         (lit.generation, lit.radiosity.clone(), converged)
     };
-    let gathered = gather_render_scene(world);
-    let result = world.resource_scope(|world, gpu: Mut<Gpu>| -> Result<(), RenderError> {
+    world.resource_scope(|world, gpu: Mut<Gpu>| -> Result<bool, RenderError> {
         let state = world.resource::<RenderState>();
-        let scene_changed = state.scene.as_deref() != Some(&gathered);
         let light_changed = state.uploaded_generation != Some(generation)
             && (converged
                 || state
                     .uploaded_light
                     .as_ref()
                     .is_none_or(|old| max_rel_change(&light, old) >= settings.visible_change));
-        let needs_upload = state.renderer.is_none() || scene_changed || light_changed;
-        if needs_upload {
-            if gathered.triangles.is_empty() {
-                return Ok(());
-            }
+        if state.renderer.is_none() || changes.scene || light_changed {
             let rs = build_scene(world, &settings)?;
+            if rs.vertices.is_empty() {
+                // Nothing to draw: keep looking until something is spawned.
+                world.resource_mut::<RenderChanges>().scene = true;
+                return Ok(world.resource::<RenderState>().renderer.is_some());
+            }
             let mut state = world.resource_mut::<RenderState>();
             match state.renderer.as_mut() {
                 Some(r) => r.set_scene(&gpu.0, &rs)?,
@@ -278,7 +386,87 @@ pub fn render_frame(world: &mut World) {
             state.uploaded_generation = Some(generation);
             state.uploaded_light = Some(light.clone());
             state.uploads += 1;
+        } else if changes.camera {
+            let Some(old) = world
+                .resource::<RenderState>()
+                .renderer
+                .as_ref()
+                .map(|r| r.camera())
+            else {
+                return Ok(false);
+            };
+            let camera = camera_view(world, old);
+            if let Some(r) = world.resource_mut::<RenderState>().renderer.as_mut() {
+                r.set_camera(camera);
+            }
         }
+        Ok(world.resource::<RenderState>().renderer.is_some())
+    })
+}
+
+/// Draws the world into `target` (a view of a `width × height` texture of `format`), e.g. a
+/// window's surface texture, after [`prepare_frame`]. With `timed`, every pass is measured
+/// (GPU timestamps where the adapter has them) and the times kept in
+/// [`RenderState::timings`]; that waits for the GPU, so do it now and then, not every frame.
+pub fn render_to(
+    world: &mut World,
+    target: &radiant_render::wgpu::TextureView,
+    (width, height): (u32, u32),
+    format: radiant_render::wgpu::TextureFormat,
+    timed: bool,
+) -> Result<(), RenderError> {
+    let frame_settings = extract_settings(world);
+    world.resource_scope(|world, gpu: Mut<Gpu>| {
+        let mut state = world.resource_mut::<RenderState>();
+        let Some(renderer) = state.renderer.as_mut() else {
+            return Ok(());
+        };
+        if timed {
+            let t =
+                renderer.render_timed(&gpu.0, target, width, height, format, &frame_settings)?;
+            state.timings = Some(t);
+        } else {
+            renderer.render(&gpu.0, target, width, height, format, &frame_settings)?;
+        }
+        state.frames += 1;
+        state.settings = Some(frame_settings);
+        state.error = None;
+        Ok(())
+    })
+}
+
+/// Installs (or with `None` removes) an overlay drawn over every frame as the graph's last
+/// pass; the viewer's egui inspector is one.
+pub fn set_overlay(world: &mut World, overlay: Option<Arc<dyn radiant_post::overlay::Overlay>>) {
+    let mut state = world.resource_mut::<RenderState>();
+    if let Some(r) = state.renderer.as_mut() {
+        r.set_overlay(overlay);
+    } else {
+        state.pending_overlay = Some(overlay);
+    }
+}
+
+/// Brings the renderer up to date ([`prepare_frame`]) and renders one frame offscreen (read
+/// back into [`LastFrame`] with [`RenderSettings::capture`]).
+pub fn render_frame(world: &mut World) {
+    let result = render_offscreen(world);
+    if let Err(e) = result {
+        tracing::error!("frame not rendered: {e}");
+        world.resource_mut::<RenderState>().error = Some(e.to_string());
+    }
+}
+
+fn render_offscreen(world: &mut World) -> Result<(), RenderError> {
+    if !prepare_frame(world)? {
+        return Ok(());
+    }
+    apply_pending_overlay(world);
+    let settings = *world.resource::<RenderSettings>();
+    if !settings.offscreen {
+        return Ok(());
+    }
+    let frame_settings = extract_settings(world);
+    world.resource_scope(|world, gpu: Mut<Gpu>| -> Result<(), RenderError> {
         let (w, h) = settings.size;
         let mut state = world.resource_mut::<RenderState>();
         if settings.capture {
@@ -324,9 +512,16 @@ pub fn render_frame(world: &mut World) {
         state.settings = Some(frame_settings);
         state.error = None;
         Ok(())
-    });
-    if let Err(e) = result {
-        tracing::error!("frame not rendered: {e}");
-        world.resource_mut::<RenderState>().error = Some(e.to_string());
+    })
+}
+
+/// Hands an overlay set before the renderer existed to the renderer.
+pub fn apply_pending_overlay(world: &mut World) {
+    let mut state = world.resource_mut::<RenderState>();
+    if state.renderer.is_some()
+        && let Some(overlay) = state.pending_overlay.take()
+        && let Some(r) = state.renderer.as_mut()
+    {
+        r.set_overlay(overlay);
     }
 }

@@ -13,12 +13,13 @@ use radiant_render::graph::{
     CompiledGraph, GraphReport, PassTimings, RenderGraph, TextureDesc, TextureHandle, TexturePool,
 };
 use radiant_render::lighting::{DebugView, LightingPipeline, lighting_pass};
-use radiant_render::scene::{GpuScene, RenderScene};
+use radiant_render::scene::{CameraView, GpuScene, RenderScene};
 use radiant_render::ssao::{AO_FORMAT, Ssao, SsaoPipeline, ssao_pass};
 use radiant_render::{GpuContext, RenderError, Requirements};
 
 use crate::bloom::{BLOOM_FORMAT, Bloom, BloomPipeline, bloom_pass};
 use crate::blur::{BlurPipeline, GaussianBlur, gaussian_blur};
+use crate::overlay::{Overlay, OverlayPipeline, overlay_pass};
 use crate::sobel::{Sobel, SobelInputs, SobelPipeline, sobel_pass};
 use crate::tonemapping::{Tonemapping, TonemappingPipeline, tonemapping_pass};
 
@@ -95,6 +96,7 @@ pub struct FramePipelines {
     bloom: Arc<BloomPipeline>,
     blur: Arc<BlurPipeline>,
     sobel: Arc<SobelPipeline>,
+    overlay: Arc<OverlayPipeline>,
 }
 
 impl FramePipelines {
@@ -109,6 +111,7 @@ impl FramePipelines {
             bloom: Arc::new(BloomPipeline::new(&gpu.device, blur.clone())),
             blur,
             sobel: Arc::new(SobelPipeline::new(&gpu.device)),
+            overlay: Arc::new(OverlayPipeline::new(&gpu.device)),
         }
     }
 }
@@ -135,6 +138,7 @@ struct FrameKey {
     format: wgpu::TextureFormat,
     settings: FrameSettings,
     scene_generation: u64,
+    overlay_generation: u64,
 }
 
 /// One frame's outputs read back to the CPU.
@@ -150,8 +154,10 @@ pub struct FrameRenderer {
     pipelines: FramePipelines,
     support: EffectSupport,
     scene: Arc<GpuScene>,
-    near_far: [f32; 2],
+    camera: CameraView,
     scene_generation: u64,
+    overlay: Option<Arc<dyn Overlay>>,
+    overlay_generation: u64,
     pool: TexturePool,
     compiled: Option<Compiled>,
     compiles: u64,
@@ -190,8 +196,10 @@ impl FrameRenderer {
             pipelines,
             support,
             scene: Arc::new(gpu_scene),
-            near_far: [scene.camera.near, scene.camera.far],
+            camera: scene.camera,
             scene_generation: 0,
+            overlay: None,
+            overlay_generation: 0,
             pool: TexturePool::new(),
             compiled: None,
             compiles: 0,
@@ -201,9 +209,30 @@ impl FrameRenderer {
     /// Replaces the scene (the graph recompiles on the next frame).
     pub fn set_scene(&mut self, gpu: &GpuContext, scene: &RenderScene) -> Result<(), RenderError> {
         self.scene = Arc::new(GpuScene::upload(gpu, scene)?);
-        self.near_far = [scene.camera.near, scene.camera.far];
+        self.camera = scene.camera;
         self.scene_generation += 1;
         Ok(())
+    }
+
+    /// Moves the camera; nothing is uploaded but the camera uniform of the next frame. A new
+    /// near or far plane recompiles the graph (the depth-edge pass bakes them in).
+    pub fn set_camera(&mut self, camera: CameraView) {
+        if (camera.near, camera.far) != (self.camera.near, self.camera.far) {
+            self.scene_generation += 1;
+        }
+        self.camera = camera;
+    }
+
+    /// The camera the next frame is drawn from.
+    pub fn camera(&self) -> CameraView {
+        self.camera
+    }
+
+    /// Draws `overlay` over every frame as the graph's last pass (`None`: no overlay pass and
+    /// no extra texture). The graph recompiles on the next frame.
+    pub fn set_overlay(&mut self, overlay: Option<Arc<dyn Overlay>>) {
+        self.overlay = overlay;
+        self.overlay_generation += 1;
     }
 
     /// What the adapter can run.
@@ -246,6 +275,15 @@ impl FrameRenderer {
                 usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
             },
         );
+        // With an overlay, the frame is composited first and the overlay pass writes the target.
+        let final_target = target;
+        let target = match &self.overlay {
+            Some(_) => g.create(
+                "composited",
+                TextureDesc::new(width, height, format.add_srgb_suffix()),
+            ),
+            None => target,
+        };
         let gb = gbuffer_pass(&mut g, width, height, p.gbuffer.clone(), self.scene.clone());
         let ao = match settings.ssao {
             Some(s) if self.support.ssao => Some(ssao_pass(
@@ -289,6 +327,7 @@ impl FrameRenderer {
                 &p.tonemapping,
                 device,
             );
+            self.add_overlay(&mut g, target, final_target, device);
             return Ok((g, hdr));
         }
         let ldr = g.create(
@@ -313,11 +352,31 @@ impl FrameRenderer {
                 color: current,
                 depth: Some(gb.depth),
                 normal: Some(gb.normal),
-                near_far: self.near_far,
+                near_far: [self.camera.near, self.camera.far],
             };
             sobel_pass(&mut g, inputs, s, Some(target), &p.sobel, device)?;
         }
+        self.add_overlay(&mut g, target, final_target, device);
         Ok((g, hdr))
+    }
+
+    fn add_overlay(
+        &self,
+        g: &mut RenderGraph,
+        composited: TextureHandle,
+        target: TextureHandle,
+        device: &wgpu::Device,
+    ) {
+        if let Some(overlay) = &self.overlay {
+            overlay_pass(
+                g,
+                composited,
+                target,
+                overlay.clone(),
+                &self.pipelines.overlay,
+                device,
+            );
+        }
     }
 
     fn prepare(
@@ -339,6 +398,7 @@ impl FrameRenderer {
             format,
             settings: *settings,
             scene_generation: self.scene_generation,
+            overlay_generation: self.overlay_generation,
         };
         if self.compiled.as_ref().is_some_and(|c| c.key == key) {
             return Ok(());
@@ -368,7 +428,8 @@ impl FrameRenderer {
         settings: &FrameSettings,
     ) -> Result<(), RenderError> {
         self.prepare(gpu, width, height, format, settings)?;
-        self.scene.update_camera(&gpu.queue, width, height);
+        self.scene
+            .write_camera(&gpu.queue, &self.camera, width, height);
         let Some(c) = &self.compiled else {
             return Err(RenderError::Graph("no compiled graph".into()));
         };
@@ -386,7 +447,8 @@ impl FrameRenderer {
         settings: &FrameSettings,
     ) -> Result<PassTimings, RenderError> {
         self.prepare(gpu, width, height, format, settings)?;
-        self.scene.update_camera(&gpu.queue, width, height);
+        self.scene
+            .write_camera(&gpu.queue, &self.camera, width, height);
         let Some(c) = &self.compiled else {
             return Err(RenderError::Graph("no compiled graph".into()));
         };

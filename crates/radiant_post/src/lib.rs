@@ -4,6 +4,7 @@
 //! - [`tonemapping`]: exposure and six operators (CPU twins in `radiant_color::Tonemap`);
 //! - [`sobel`]: edge overlay on colour, depth or normals;
 //! - [`blur`]: separable Gaussian;
+//! - [`overlay`]: a GUI drawn as the frame's last pass;
 //! - [`frame`]: the standard frame, with every optional effect an `Option`.
 //!
 //! ```no_run
@@ -23,6 +24,7 @@
 pub mod bloom;
 pub mod blur;
 pub mod frame;
+pub mod overlay;
 pub mod sobel;
 pub mod tonemapping;
 
@@ -31,6 +33,7 @@ pub fn shaders() -> Vec<(&'static str, String)> {
     vec![
         ("bloom", bloom::shader_source()),
         ("blur", blur::shader_source()),
+        ("overlay", overlay::shader_source()),
         ("sobel", sobel::shader_source()),
         ("tonemapping", tonemapping::shader_source()),
     ]

@@ -814,3 +814,70 @@ fn exr_holds_linear_radiance_exactly() {
     }
     let _ = std::fs::remove_file(&path);
 }
+
+/// Counts its calls and draws nothing: the frame under it must come through unchanged.
+#[derive(Default)]
+struct CountingOverlay {
+    prepared: std::sync::atomic::AtomicUsize,
+    drawn: std::sync::atomic::AtomicUsize,
+}
+
+impl radiant_post::overlay::Overlay for CountingOverlay {
+    fn prepare(
+        &self,
+        _: &wgpu::Device,
+        _: &wgpu::Queue,
+        _: &mut wgpu::CommandEncoder,
+        size: (u32, u32),
+    ) {
+        assert_eq!(size, (64, 48));
+        self.prepared
+            .fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+    }
+    fn draw(&self, _: &mut wgpu::RenderPass<'static>, _: (u32, u32)) {
+        self.drawn.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+    }
+}
+
+#[test]
+fn an_overlay_is_the_last_pass_keeps_the_frame_and_leaves_with_it() {
+    let gpu = gpu();
+    let mut frame = FrameRenderer::new(&gpu, &cornell()).expect("renderer");
+    let s = FrameSettings::default();
+    let draw = |frame: &mut FrameRenderer, format: wgpu::TextureFormat| {
+        let tex = radiant_render::util::target_texture(&gpu.device, "t", 64, 48, format);
+        let view = tex.create_view(&Default::default());
+        frame
+            .render(&gpu, &view, 64, 48, format, &s)
+            .expect("frame");
+        radiant_render::capture::read_texture(&gpu, &tex).expect("read back")
+    };
+    let srgb = wgpu::TextureFormat::Rgba8UnormSrgb;
+    let plain = draw(&mut frame, srgb);
+    let passes = |frame: &FrameRenderer| frame.report().expect("compiled").passes.clone();
+    assert!(!passes(&frame).contains(&"overlay_pass"));
+
+    let overlay = Arc::new(CountingOverlay::default());
+    frame.set_overlay(Some(overlay.clone()));
+    let over = draw(&mut frame, srgb);
+    assert_eq!(passes(&frame).last(), Some(&"overlay_pass"));
+    assert_eq!(
+        overlay.prepared.load(std::sync::atomic::Ordering::SeqCst),
+        1
+    );
+    assert_eq!(overlay.drawn.load(std::sync::atomic::Ordering::SeqCst), 1);
+    assert_eq!(over.texels, plain.texels, "the copy changed the frame");
+
+    // Into a linear-format target (egui's preference) the pass encodes to sRGB itself.
+    let linear = draw(&mut frame, wgpu::TextureFormat::Rgba8Unorm);
+    for (a, b) in linear.texels.iter().zip(&plain.texels) {
+        for c in 0..3 {
+            assert!((a[c] - b[c]).abs() <= 1.0 / 255.0 + 1e-6, "{a:?} vs {b:?}");
+        }
+    }
+    frame.set_overlay(None);
+    draw(&mut frame, srgb);
+    let r = frame.report().expect("compiled");
+    assert!(!r.passes.contains(&"overlay_pass"));
+    assert!(!r.physical_textures.iter().any(|(n, _)| *n == "composited"));
+}

@@ -599,13 +599,19 @@ impl GpuScene {
         })
     }
 
-    /// Writes the camera uniform for a `width × height` target.
+    /// Writes the camera uniform for a `width × height` target, from the uploaded camera.
     pub fn update_camera(&self, queue: &wgpu::Queue, width: u32, height: u32) {
+        self.write_camera(queue, &self.camera_view, width, height);
+    }
+
+    /// Writes the camera uniform for a `width × height` target, from `camera` (a moved view of
+    /// the same scene; nothing else is uploaded).
+    pub fn write_camera(&self, queue: &wgpu::Queue, camera: &CameraView, width: u32, height: u32) {
         let (w, h) = (width.max(1) as f32, height.max(1) as f32);
-        let view = self.camera_view.view(self.origin);
-        let proj = self.camera_view.projection(w / h);
+        let view = camera.view(self.origin);
+        let proj = camera.projection(w / h);
         let vp = proj * view;
-        let eye = (self.camera_view.position - self.origin).as_vec3();
+        let eye = (camera.position - self.origin).as_vec3();
         let u = CameraUniform {
             view_proj: vp.to_cols_array_2d(),
             inv_view_proj: vp.inverse().to_cols_array_2d(),
@@ -614,12 +620,7 @@ impl GpuScene {
             inv_proj: proj.inverse().to_cols_array_2d(),
             position: [eye.x, eye.y, eye.z, 1.0],
             viewport: [w, h, 1.0 / w, 1.0 / h],
-            params: [
-                self.camera_view.near,
-                self.camera_view.far,
-                self.light_count as f32,
-                0.0,
-            ],
+            params: [camera.near, camera.far, self.light_count as f32, 0.0],
         };
         queue.write_buffer(&self.camera, 0, bytemuck::bytes_of(&u));
     }
