@@ -301,6 +301,30 @@ pub fn map_to_gamut(rgb: [f64; 3], method: GamutMapping) -> [f64; 3] {
     }
 }
 
+/// The colour of a black body at `kelvin` (the Planckian locus): its xy chromaticity and a
+/// linear sRGB colour of that chromaticity with the largest channel 1 (desaturated into the
+/// gamut where the locus leaves it, below about 1 900 K). `None` for a temperature that is not
+/// finite and positive.
+pub fn blackbody_color(kelvin: f64) -> Option<([f64; 2], [f64; 3])> {
+    if !(kelvin.is_finite() && kelvin > 0.0) {
+        return None;
+    }
+    let (xyz, _) = reflectance_to_xyz(&Spectrum::blackbody(kelvin), &Spectrum::constant(1.0));
+    let c = xy(xyz);
+    if c[1] <= 0.0 {
+        return None;
+    }
+    let xyz = [c[0] / c[1], 1.0, (1.0 - c[0] - c[1]) / c[1]];
+    let (rgb, _) = xyz_to_srgb_linear(xyz);
+    let rgb = if rgb.iter().any(|&v| v < 0.0) {
+        map_to_gamut(rgb, GamutMapping::Desaturate)
+    } else {
+        rgb
+    };
+    let peak = rgb.iter().copied().fold(0.0, f64::max);
+    (peak > 0.0).then(|| (c, rgb.map(|v| v / peak)))
+}
+
 /// CIELAB of an XYZ colour relative to a white.
 pub fn xyz_to_lab(xyz: [f64; 3], white: [f64; 3]) -> [f64; 3] {
     let f = |t: f64| {

@@ -260,3 +260,33 @@ fn out_of_gamut_colours_are_mapped_by_a_stated_method() {
         [0.1, 0.2, 0.3]
     );
 }
+
+/// The Planckian locus against colour-science 0.4.7: `sd_blackbody(T, 360–830 nm at 1 nm)`,
+/// `sd_to_XYZ(…, CIE 1931 2°, method="Integration")`, `XYZ_to_xy` (computed on 2026-11-22).
+#[test]
+fn blackbody_chromaticity_matches_colour_science() {
+    let reference = [
+        (1500.0, [0.585_720_99, 0.393_119_69]),
+        (2000.0, [0.526_680_99, 0.413_296_46]),
+        (4000.0, [0.380_442_36, 0.376_748_59]),
+        (6500.0, [0.313_527_51, 0.323_629_89]),
+        (10000.0, [0.280_634_46, 0.288_288_89]),
+    ];
+    for (t, xy) in reference {
+        let (c, rgb) = cie::blackbody_color(t).expect("a colour");
+        assert!(
+            (c[0] - xy[0]).abs() < 2e-4 && (c[1] - xy[1]).abs() < 2e-4,
+            "{t} K: {c:?} vs {xy:?}"
+        );
+        let peak = rgb.iter().copied().fold(0.0, f64::max);
+        assert!((peak - 1.0).abs() < 1e-12 && rgb.iter().all(|&v| v >= 0.0));
+    }
+    // Warm is red-heavy, cool is blue-heavy.
+    let (_, warm) = cie::blackbody_color(2000.0).expect("colour");
+    let (_, cool) = cie::blackbody_color(10000.0).expect("colour");
+    assert!(warm[0] > warm[1] && warm[1] > warm[2]);
+    assert!(cool[2] > cool[0]);
+    for bad in [0.0, -5.0, f64::NAN, f64::INFINITY] {
+        assert!(cie::blackbody_color(bad).is_none());
+    }
+}

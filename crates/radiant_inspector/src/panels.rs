@@ -1,0 +1,454 @@
+//! The inspector's panels. Each reads the ECS world and writes it back only when the user
+//! changed something, so change detection sees real edits only (and the bake rebakes only
+//! what they touched).
+
+use bevy_ecs::prelude::*;
+use egui::{Color32, DragValue, RichText, Slider, Ui};
+use egui_plot::{Line, Plot, PlotPoints};
+use radiant_ecs::bake::{BakeControl, BakePhase, BakeStatus, RadiosityBake};
+use radiant_ecs::render::{Bloom, DebugView, GaussianBlur, RenderState, Sobel, Ssao, Tonemapping};
+use radiant_ecs::scene::{Material, PunctualLight, SceneCamera, SurfaceOrder};
+use radiant_scene::LightKind;
+
+use crate::InspectorState;
+use crate::colour::{self, chromaticity, chromaticity_diagram, from_chromaticity};
+use crate::inspect::Inspect;
+
+fn warn(ui: &mut Ui, text: impl Into<String>) {
+    ui.colored_label(Color32::from_rgb(230, 160, 60), text.into());
+}
+
+/// Surfaces in spawn order: (entity, name).
+fn surfaces(world: &mut World) -> Vec<(Entity, String)> {
+    let mut q = world.query::<(Entity, &SurfaceOrder, Option<&Name>, &Material)>();
+    let mut rows: Vec<_> = q
+        .iter(world)
+        .map(|(e, o, n, _)| {
+            (
+                *o,
+                e,
+                n.map_or_else(|| format!("surface {}", o.0), |n| n.as_str().to_owned()),
+            )
+        })
+        .collect();
+    rows.sort_by_key(|r| r.0);
+    rows.into_iter().map(|(_, e, n)| (e, n)).collect()
+}
+
+/// Colour: the selected surface's base colour (reflectance) and emission in linear RGB, sRGB
+/// hex and HDR intensity, and the CIE 1931 xy diagram. A click in the diagram sets the base
+/// colour's chromaticity at its luminance; outside sRGB the point is ringed and the colour
+/// desaturated into the gamut.
+pub fn colour_panel(ui: &mut Ui, world: &mut World, state: &mut InspectorState) {
+    let list = surfaces(world);
+    if list.is_empty() {
+        ui.label("No surfaces in the world.");
+        return;
+    }
+    if state
+        .surface
+        .is_none_or(|s| !list.iter().any(|(e, _)| *e == s))
+    {
+        state.surface = Some(list[0].0);
+        state.hex_base.clear();
+        state.hex_emission.clear();
+        state.picked_xy = None;
+    }
+    let Some(selected) = state.surface else {
+        return;
+    };
+    let current = list
+        .iter()
+        .find(|(e, _)| *e == selected)
+        .map_or("", |(_, n)| n.as_str());
+    egui::ComboBox::from_label("surface")
+        .selected_text(current)
+        .show_ui(ui, |ui| {
+            for (e, name) in &list {
+                if ui.selectable_label(*e == selected, name).clicked() && *e != selected {
+                    state.surface = Some(*e);
+                    state.hex_base.clear();
+                    state.hex_emission.clear();
+                    state.picked_xy = None;
+                }
+            }
+        });
+    let Some(entity) = state.surface else { return };
+    let Some(material) = world.get::<Material>(entity).copied() else {
+        return;
+    };
+    let Material {
+        mut reflectance,
+        mut emission,
+    } = material;
+    let mut changed = false;
+    ui.label(RichText::new("Base colour (reflectance)").strong());
+    changed |= colour::rgb_editor(ui, "hex_base", &mut reflectance, 0.999, &mut state.hex_base);
+    ui.label(RichText::new("Emission").strong());
+    changed |= colour::hdr_editor(ui, "hex_emission", &mut emission, &mut state.hex_emission);
+
+    let base_xy = chromaticity(reflectance);
+    let mut points = vec![("base", base_xy, reflectance)];
+    if emission.iter().any(|&e| e > 0.0) {
+        let peak = emission.iter().copied().fold(0.0, f64::max);
+        points.push((
+            "emission",
+            chromaticity(emission),
+            emission.map(|e| e / peak),
+        ));
+    }
+    if let Some((xy, rgb)) = state.picked_xy {
+        points.push(("picked", xy, rgb));
+    }
+    ui.label("CIE 1931 xy: click to set the base colour's chromaticity");
+    if let Some(xy) = chromaticity_diagram(ui, 260.0, &points) {
+        let y = colour::luminance_y(reflectance).max(0.05);
+        if let Some((rgb, outside)) = from_chromaticity(xy, y) {
+            reflectance = rgb.map(|c| c.min(0.999));
+            state.picked_xy = outside.then_some((xy, reflectance));
+            state.hex_base.clear();
+            changed = true;
+        }
+    }
+    if let Some((xy, rgb)) = state.picked_xy {
+        warn(
+            ui,
+            format!(
+                "picked xy ({:.3}, {:.3}) is outside sRGB: stored as {}",
+                xy[0],
+                xy[1],
+                colour::to_hex(rgb)
+            ),
+        );
+    }
+    if changed && let Some(mut m) = world.get_mut::<Material>(entity) {
+        *m = Material {
+            reflectance,
+            emission,
+        };
+    }
+}
+
+/// Lights: colour (with a colour-temperature picker), intensity, range and cone angles.
+pub fn lights_panel(ui: &mut Ui, world: &mut World, state: &mut InspectorState) {
+    let mut q = world.query::<(Entity, &PunctualLight)>();
+    let mut lights: Vec<(Entity, radiant_scene::Light)> =
+        q.iter(world).map(|(e, l)| (e, l.0.clone())).collect();
+    lights.sort_by_key(|(e, _)| *e);
+    if lights.is_empty() {
+        ui.label("No punctual lights. Emissive surfaces are edited in the Colour panel.");
+        return;
+    }
+    for (entity, mut light) in lights {
+        let mut changed = false;
+        egui::CollapsingHeader::new(light.name.clone())
+            .id_salt(entity)
+            .default_open(true)
+            .show(ui, |ui| {
+                let radiant_scene::Light {
+                    name: _,
+                    kind,
+                    position: _,
+                    direction: _,
+                    color,
+                    intensity,
+                    range,
+                } = &mut light;
+                let hex = state.hex_lights.entry(entity).or_default();
+                changed |=
+                    colour::rgb_editor(ui, &format!("hex_light_{entity:?}"), color, 1.0, hex);
+                let kelvin = state.kelvin.entry(entity).or_insert(6504.0);
+                if let Some(rgb) = colour::kelvin_picker(ui, kelvin) {
+                    *color = rgb;
+                    hex.clear();
+                    changed = true;
+                }
+                let unit = if matches!(kind, LightKind::Directional) {
+                    " lx"
+                } else {
+                    " cd"
+                };
+                ui.horizontal(|ui| {
+                    let label = ui.label("intensity");
+                    let speed = (*intensity * 0.01).max(0.01);
+                    changed |= ui
+                        .add(
+                            DragValue::new(intensity)
+                                .range(0.0..=1e7)
+                                .speed(speed)
+                                .suffix(unit),
+                        )
+                        .labelled_by(label.id)
+                        .changed();
+                });
+                if !matches!(kind, LightKind::Directional) {
+                    ui.horizontal(|ui| {
+                        let mut limited = range.is_some();
+                        let toggle = ui.checkbox(&mut limited, "range");
+                        if toggle.changed() {
+                            *range = limited.then_some(10.0);
+                            changed = true;
+                        }
+                        if let Some(r) = range {
+                            changed |= ui
+                                .add(DragValue::new(r).range(1e-3..=1e6).speed(0.05).suffix(" m"))
+                                .labelled_by(toggle.id)
+                                .changed();
+                        }
+                    });
+                }
+                if let LightKind::Spot {
+                    inner_cone_angle,
+                    outer_cone_angle,
+                } = kind
+                {
+                    let mut inner = inner_cone_angle.to_degrees();
+                    let mut outer = outer_cone_angle.to_degrees();
+                    let a = ui.add(Slider::new(&mut inner, 0.0..=90.0).text("inner cone (°)"));
+                    let b = ui.add(Slider::new(&mut outer, 0.0..=90.0).text("outer cone (°)"));
+                    if a.changed() || b.changed() {
+                        // glTF: 0 ≤ inner < outer ≤ π/2.
+                        outer = outer.max(0.1);
+                        inner = inner.min(outer - 0.05).max(0.0);
+                        *inner_cone_angle = inner.to_radians();
+                        *outer_cone_angle = outer.to_radians();
+                        changed = true;
+                    }
+                }
+            });
+        if changed && let Some(mut l) = world.get_mut::<PunctualLight>(entity) {
+            l.0 = light;
+        }
+    }
+}
+
+fn camera_entity(world: &mut World) -> Option<Entity> {
+    let mut q = world.query_filtered::<Entity, With<SceneCamera>>();
+    q.iter(world).next()
+}
+
+/// An effect component on the camera and the settings it wraps.
+trait EffectComponent: Component<Mutability = bevy_ecs::component::Mutable> + Copy + Default {
+    type Settings: Inspect + Copy;
+    fn settings(&self) -> Self::Settings;
+    fn wrap(settings: Self::Settings) -> Self;
+}
+
+macro_rules! effect_component {
+    ($component:ident, $settings:ty) => {
+        impl EffectComponent for $component {
+            type Settings = $settings;
+            fn settings(&self) -> $settings {
+                self.0
+            }
+            fn wrap(settings: $settings) -> Self {
+                Self(settings)
+            }
+        }
+    };
+}
+effect_component!(Bloom, radiant_post::bloom::Bloom);
+effect_component!(Ssao, radiant_render::ssao::Ssao);
+effect_component!(Sobel, radiant_post::sobel::Sobel);
+effect_component!(GaussianBlur, radiant_post::blur::GaussianBlur);
+
+/// One optional effect: a toggle that inserts or removes its component (the render graph
+/// recompiles without its passes and textures), and its settings when on.
+fn effect<C: EffectComponent>(ui: &mut Ui, world: &mut World, camera: Entity, name: &str) {
+    let current = world.get::<C>(camera).copied();
+    let mut on = current.is_some();
+    if ui.checkbox(&mut on, RichText::new(name).strong()).changed() {
+        if on {
+            world.entity_mut(camera).insert(C::default());
+        } else {
+            world.entity_mut(camera).remove::<C>();
+        }
+        return;
+    }
+    if let Some(c) = current {
+        let mut settings = c.settings();
+        ui.indent(name, |ui| {
+            if settings.inspect(ui)
+                && let Some(mut slot) = world.get_mut::<C>(camera)
+            {
+                *slot = C::wrap(settings);
+            }
+        });
+    }
+}
+
+/// Post-processing: tone mapping, the debug view, and SSAO, bloom, Sobel and blur as
+/// toggles with their settings.
+pub fn post_panel(ui: &mut Ui, world: &mut World, _state: &mut InspectorState) {
+    let Some(camera) = camera_entity(world) else {
+        ui.label("No camera in the world.");
+        return;
+    };
+    ui.label(RichText::new("Tone mapping").strong());
+    let mut tm = world
+        .get::<Tonemapping>(camera)
+        .copied()
+        .unwrap_or_default();
+    if tm.0.inspect(ui) {
+        world.entity_mut(camera).insert(tm);
+    }
+    let mut view = world.get::<DebugView>(camera).copied().unwrap_or_default();
+    if view.0.inspect(ui) {
+        world.entity_mut(camera).insert(view);
+    }
+    ui.separator();
+    effect::<Ssao>(ui, world, camera, "SSAO");
+    effect::<Bloom>(ui, world, camera, "bloom");
+    effect::<GaussianBlur>(ui, world, camera, "Gaussian blur");
+    effect::<Sobel>(ui, world, camera, "Sobel edges");
+}
+
+fn phase_name(p: BakePhase) -> &'static str {
+    match p {
+        BakePhase::Idle => "idle",
+        BakePhase::NoEmitters => "nothing to bake (no emitters)",
+        BakePhase::Building => "building links",
+        BakePhase::Solving => "solving",
+        BakePhase::Converged => "converged",
+        BakePhase::Paused => "paused",
+        BakePhase::Cancelled => "cancelled",
+        BakePhase::Failed => "failed",
+    }
+}
+
+/// Radiosity: method, patch size and budget (a change rebakes); pause, resume, rebake,
+/// cancel; progress, ETA and the stale flag; the estimated error against time.
+pub fn radiosity_panel(ui: &mut Ui, world: &mut World, _state: &mut InspectorState) {
+    let Some(mut settings) = world.get_resource::<RadiosityBake>().cloned() else {
+        ui.label("No bake requested (insert a RadiosityBake resource to bake).");
+        return;
+    };
+    if settings.params.inspect(ui) {
+        world.insert_resource(settings);
+        world.resource_mut::<BakeControl>().rebake();
+    }
+    let status = world.resource::<BakeStatus>().clone();
+    let paused = world.resource::<BakeControl>().is_paused();
+    ui.horizontal(|ui| {
+        let mut control = None;
+        if paused {
+            if ui.button("resume").clicked() {
+                control = Some(BakeControl::resume as fn(&mut BakeControl));
+            }
+        } else if ui.button("pause").clicked() {
+            control = Some(BakeControl::pause);
+        }
+        if ui.button("rebake").clicked() {
+            control = Some(BakeControl::rebake);
+        }
+        if ui.button("cancel").clicked() {
+            control = Some(BakeControl::cancel);
+        }
+        if let Some(f) = control {
+            f(&mut world.resource_mut::<BakeControl>());
+        }
+    });
+    ui.label(format!(
+        "{}{}",
+        phase_name(status.phase),
+        if status.stale {
+            " · stale: an edit is being baked"
+        } else {
+            ""
+        }
+    ));
+    let eta = status
+        .eta_s
+        .map_or_else(String::new, |s| format!(", ETA {s:.1} s"));
+    ui.add(
+        egui::ProgressBar::new(status.progress.clamp(0.0, 1.0) as f32)
+            .text(format!("{:.0} %{eta}", status.progress * 100.0)),
+    );
+    ui.label(format!(
+        "{} elements, {} links, {} iterations, est. error {:.2e}{}",
+        status.elements,
+        status.links,
+        status.iterations,
+        status.estimated_error,
+        if status.resumed {
+            ", resumed from checkpoint"
+        } else {
+            ""
+        }
+    ));
+    if let Some(e) = &status.error {
+        ui.colored_label(Color32::from_rgb(230, 60, 50), e);
+    }
+    if let Some(w) = &status.warning {
+        warn(ui, w);
+    }
+    let points: Vec<[f64; 2]> = status
+        .history
+        .iter()
+        .filter(|(t, e)| t.is_finite() && *e > 0.0 && e.is_finite())
+        .map(|&(t, e)| [t, e.log10()])
+        .collect();
+    Plot::new("bake_error_vs_time")
+        .height(140.0)
+        .x_axis_label("seconds")
+        .y_axis_label("est. error")
+        .y_axis_formatter(|mark, _| format!("1e{:.0}", mark.value))
+        .allow_scroll(false)
+        .show(ui, |plot| {
+            plot.line(Line::new("estimated error", PlotPoints::from(points)));
+        });
+}
+
+/// Performance: frame time, per-pass times, and the compiled graph's textures.
+pub fn performance_panel(ui: &mut Ui, world: &mut World, state: &mut InspectorState) {
+    if let Some(ms) = state.median_frame_ms() {
+        ui.label(format!(
+            "frame: {ms:.2} ms median over {} frames ({:.0} fps)",
+            state.frame_ms.len(),
+            1000.0 / ms.max(1e-6)
+        ));
+    } else {
+        ui.label("frame: not measured yet");
+    }
+    let Some(render) = world.get_resource::<RenderState>() else {
+        ui.label("No renderer in this world.");
+        return;
+    };
+    if let Some(t) = &render.timings {
+        ui.label(
+            RichText::new(if t.gpu {
+                "GPU time per pass"
+            } else {
+                "CPU time per pass"
+            })
+            .strong(),
+        );
+        egui::Grid::new("pass_timings")
+            .striped(true)
+            .show(ui, |ui| {
+                let mut total = 0.0;
+                for (name, ms) in &t.passes {
+                    ui.label(*name);
+                    ui.label(format!("{ms:.3} ms"));
+                    ui.end_row();
+                    total += ms;
+                }
+                ui.label(RichText::new("total").strong());
+                ui.label(format!("{total:.3} ms"));
+                ui.end_row();
+            });
+    }
+    if let Some(g) = render.graph() {
+        ui.label(format!(
+            "graph: {} passes ({} culled), {} textures in {} allocations, {:.1} MiB",
+            g.passes.len(),
+            g.culled.len(),
+            g.virtual_textures,
+            g.physical_textures.len(),
+            g.bytes as f64 / (1024.0 * 1024.0)
+        ));
+    }
+    if let Some(e) = &render.error {
+        ui.colored_label(Color32::from_rgb(230, 60, 50), e);
+    }
+}
