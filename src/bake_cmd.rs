@@ -314,7 +314,7 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
 pub fn run_default() -> anyhow::Result<()> {
     let out = PathBuf::from("radiant-out");
     println!(
-        "radiant: no viewer in this build; baking and rendering the builtin Cornell box headless into {}/",
+        "radiant: baking and rendering the builtin Cornell box headless into {}/",
         out.display()
     );
     let parse = |args: &[&str]| -> anyhow::Result<crate::Cli> {
@@ -346,6 +346,10 @@ pub fn run_default() -> anyhow::Result<()> {
     if let Some(crate::Command::Converge(args)) = cli.command {
         crate::converge_cmd::run(&args)?;
     }
+    #[cfg(not(feature = "render"))]
+    let rendered = false;
+    #[cfg(feature = "render")]
+    let mut rendered = false;
     #[cfg(feature = "render")]
     {
         let cli = parse(&[
@@ -360,10 +364,21 @@ pub fn run_default() -> anyhow::Result<()> {
         ])?;
         if let Some(crate::Command::Render(args)) = cli.command {
             // The bake and the plots are written; a machine with no GPU adapter still gets them.
-            if let Err(e) = crate::render_cmd::run(&args) {
-                eprintln!("radiant: no frame rendered: {e:#}");
+            match crate::render_cmd::run(&args) {
+                Ok(()) => rendered = true,
+                Err(e) => eprintln!("radiant: no frame rendered: {e:#}"),
             }
         }
     }
+    println!(
+        "radiant: outputs in {}/: report.json (bake report), surfaces.csv, patches.csv, light maps, \
+         convergence.csv and convergence.png (error against time){}",
+        out.display(),
+        if rendered {
+            ", frame.png and frame.exr (the rendered frame)"
+        } else {
+            ""
+        }
+    );
     Ok(())
 }

@@ -6,6 +6,8 @@ mod output;
 mod plot;
 #[cfg(feature = "render")]
 mod render_cmd;
+#[cfg(feature = "viewer")]
+mod view_cmd;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -31,6 +33,10 @@ enum Command {
     /// frame.png (tone-mapped) and frame.exr (linear radiance).
     #[cfg(feature = "render")]
     Render(render_cmd::RenderArgs),
+    /// Open the viewer: the scene through the full render graph while the bake converges,
+    /// with the egui inspector (Tab toggles it). Default: the builtin Cornell box.
+    #[cfg(feature = "viewer")]
+    View(view_cmd::ViewArgs),
 }
 
 /// Which scene to load.
@@ -263,6 +269,37 @@ pub(crate) fn load_scene(args: &SceneArgs) -> anyhow::Result<(radiant::scene::Sc
     }
 }
 
+/// `radiant` alone: the viewer on the Cornell box, or the headless path without a display.
+fn run_no_arguments() -> anyhow::Result<()> {
+    #[cfg(feature = "viewer")]
+    {
+        if radiant_viewer::display_available() {
+            let cli = <Cli as clap::Parser>::try_parse_from(["radiant", "view"])?;
+            if let Some(Command::View(args)) = cli.command {
+                match view_cmd::run(&args) {
+                    Err(e)
+                        if matches!(
+                            e.downcast_ref::<radiant_viewer::ViewerError>(),
+                            Some(
+                                radiant_viewer::ViewerError::NoDisplay(_)
+                                    | radiant_viewer::ViewerError::NoGpu(_)
+                            )
+                        ) =>
+                    {
+                        println!("radiant: {e}; running headless instead");
+                    }
+                    other => return other,
+                }
+            }
+        } else {
+            println!(
+                "radiant: no display (neither DISPLAY nor WAYLAND_DISPLAY is set): running headless"
+            );
+        }
+    }
+    bake_cmd::run_default()
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     tracing_subscriber::fmt()
@@ -277,7 +314,9 @@ fn main() -> ExitCode {
         Some(Command::Converge(args)) => converge_cmd::run(&args),
         #[cfg(feature = "render")]
         Some(Command::Render(args)) => render_cmd::run(&args),
-        None => bake_cmd::run_default(),
+        #[cfg(feature = "viewer")]
+        Some(Command::View(args)) => view_cmd::run(&args),
+        None => run_no_arguments(),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

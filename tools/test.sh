@@ -2,8 +2,9 @@
 # Radiant's whole test suite, as CI runs it: formatting, lints, every test.
 #
 # Needs: the Rust toolchain pinned in rust-toolchain.toml (1.95.0, with rustfmt and clippy), a C
-# compiler for build scripts, and a Vulkan driver for the GPU tests: with no GPU, Mesa's
-# software rasteriser lavapipe (Debian: mesa-vulkan-drivers). As root with apt, this script
+# compiler for build scripts, a Vulkan driver for the GPU tests: with no GPU, Mesa's
+# software rasteriser lavapipe (Debian: mesa-vulkan-drivers), and Xvfb and xwd for the window
+# test (Debian: xvfb x11-apps). As root with apt, this script
 # installs what is missing; otherwise it says what to install. Builds once, in the dev profile
 # (dependencies optimised, see Cargo.toml), and reuses that build for all tests.
 set -euo pipefail
@@ -38,6 +39,24 @@ if ! have_vulkan; then
   else
     echo "the GPU tests need a Vulkan driver. With no GPU, install Mesa's lavapipe:" >&2
     echo "  sudo apt-get install mesa-vulkan-drivers libvulkan1" >&2
+    exit 1
+  fi
+fi
+# The window test runs the viewer under its own Xvfb and screenshots it with xwd; winit loads
+# the X11 client libraries at run time.
+have_x11_tools() {
+  command -v Xvfb >/dev/null 2>&1 && command -v xwd >/dev/null 2>&1 &&
+    { ldconfig -p 2>/dev/null | grep 'libxkbcommon-x11\.so\.0' >/dev/null; } &&
+    { ldconfig -p 2>/dev/null | grep 'libXcursor\.so\.1' >/dev/null; }
+}
+if ! have_x11_tools; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    say "installing Xvfb and xwd for the window test"
+    apt-get update -qq && apt-get install -y -qq --no-install-recommends \
+      xvfb x11-apps libxkbcommon-x11-0 libxcursor1 libxi6 libxrandr2
+  else
+    echo "the window test needs Xvfb and xwd. Install them with:" >&2
+    echo "  sudo apt-get install xvfb x11-apps libxkbcommon-x11-0 libxcursor1 libxi6 libxrandr2" >&2
     exit 1
   fi
 fi

@@ -1,5 +1,6 @@
 //! Extraction to the renderer (feature `render`): effect components on the camera, the baked
-//! light as a light map, and a frame rendered offscreen every update.
+//! light as a light map, and a frame rendered every update: offscreen, or by a window into its
+//! surface with [`render_to`] (with `RenderSettings::offscreen` off).
 //!
 //! Effects are components named after the feature, on the [`SceneCamera`] entity: insert
 //! [`Bloom`], [`Ssao`], [`Sobel`] or [`GaussianBlur`] to turn one on, remove it to turn it off;
@@ -239,8 +240,15 @@ pub fn extract_settings(world: &mut World) -> FrameSettings {
     }
 }
 
-fn build_scene(world: &mut World, settings: &RenderSettings) -> Result<RenderScene, RenderError> {
+/// The render scene with the baked light, or `None` for a world with nothing to draw yet.
+fn build_scene(
+    world: &mut World,
+    settings: &RenderSettings,
+) -> Result<Option<RenderScene>, RenderError> {
     let scene = gather_render_scene(world);
+    if scene.triangles.is_empty() {
+        return Ok(None);
+    }
     let lit = world.resource::<BakedLighting>().clone();
     let mut rs = RenderScene::from_scene(&scene, settings.lightmap_cell)?;
     if let Some(mesh) = &lit.mesh
@@ -250,7 +258,7 @@ fn build_scene(world: &mut World, settings: &RenderSettings) -> Result<RenderSce
         lit_by_bake(&mut rs);
     }
     world.resource_mut::<RenderState>().scene = Some(Arc::new(scene));
-    Ok(rs)
+    Ok(Some(rs))
 }
 
 /// What changed since the renderer last looked (Bevy change detection, no gathering).
@@ -363,7 +371,7 @@ pub fn prepare_frame(world: &mut World) -> Result<bool, RenderError> {
             world.resource::<crate::bake::BakeStatus>().phase == crate::bake::BakePhase::Converged;
         (lit.generation, lit.radiosity.clone(), converged)
     };
-    world.resource_scope(|world, gpu: Mut<Gpu>| -> Result<bool, RenderError> {
+    let result = world.resource_scope(|world, gpu: Mut<Gpu>| -> Result<bool, RenderError> {
         let state = world.resource::<RenderState>();
         let light_changed = state.uploaded_generation != Some(generation)
             && (converged
@@ -372,12 +380,11 @@ pub fn prepare_frame(world: &mut World) -> Result<bool, RenderError> {
                     .as_ref()
                     .is_none_or(|old| max_rel_change(&light, old) >= settings.visible_change));
         if state.renderer.is_none() || changes.scene || light_changed {
-            let rs = build_scene(world, &settings)?;
-            if rs.vertices.is_empty() {
+            let Some(rs) = build_scene(world, &settings)? else {
                 // Nothing to draw: keep looking until something is spawned.
                 world.resource_mut::<RenderChanges>().scene = true;
-                return Ok(world.resource::<RenderState>().renderer.is_some());
-            }
+                return Ok(false);
+            };
             let mut state = world.resource_mut::<RenderState>();
             match state.renderer.as_mut() {
                 Some(r) => r.set_scene(&gpu.0, &rs)?,
@@ -401,7 +408,14 @@ pub fn prepare_frame(world: &mut World) -> Result<bool, RenderError> {
             }
         }
         Ok(world.resource::<RenderState>().renderer.is_some())
-    })
+    });
+    if result.is_err() {
+        // Try again next frame: a failed upload must not be forgotten.
+        let mut c = world.resource_mut::<RenderChanges>();
+        c.scene |= changes.scene;
+        c.camera |= changes.camera;
+    }
+    result
 }
 
 /// Draws the world into `target` (a view of a `width × height` texture of `format`), e.g. a

@@ -116,3 +116,68 @@ fn the_baked_light_reaches_the_frame() {
     assert!(before < 1e-6, "light map before the bake: {before}");
     assert!(after > 0.05, "light map after the bake: {after}");
 }
+
+#[test]
+fn extraction_uploads_only_what_changed() {
+    let mut app = app(false);
+    app.update();
+    let uploads = |app: &App| app.world.resource::<RenderState>().uploads;
+    assert_eq!(uploads(&app), 1);
+    let first = app
+        .world
+        .resource::<LastFrame>()
+        .ldr
+        .clone()
+        .expect("frame");
+    // Steady frames and a camera move upload nothing; the move still changes the image.
+    app.update();
+    let cam = camera(&mut app);
+    app.world
+        .get_mut::<SceneCamera>(cam)
+        .expect("camera")
+        .0
+        .position
+        .x += 0.05;
+    app.update();
+    assert_eq!(uploads(&app), 1, "a camera move re-uploaded the scene");
+    let moved = app
+        .world
+        .resource::<LastFrame>()
+        .ldr
+        .clone()
+        .expect("frame");
+    assert_ne!(
+        first.texels, moved.texels,
+        "the camera move did not reach the frame"
+    );
+    // A material edit and a despawned surface upload the scene again.
+    let mut q = app.world.query::<(Entity, &radiant_ecs::scene::Material)>();
+    let (wall, _) = q.iter(&app.world).next().expect("a surface");
+    app.world
+        .get_mut::<radiant_ecs::scene::Material>(wall)
+        .expect("material")
+        .reflectance = [0.1, 0.2, 0.3];
+    app.update();
+    assert_eq!(uploads(&app), 2);
+    app.world.despawn(wall);
+    app.update();
+    assert_eq!(uploads(&app), 3);
+    app.update();
+    assert_eq!(uploads(&app), 3);
+    assert_eq!(app.world.resource::<RenderState>().error, None);
+}
+
+#[test]
+fn an_empty_world_renders_nothing_and_reports_no_error() {
+    radiant_render::GpuContext::headless().unwrap_or_else(|e| {
+        panic!("GPU tests need an adapter: {e}. Run tools/test.sh, which installs lavapipe.")
+    });
+    let mut app = App::new();
+    app.add_plugins(RadiantPlugins).add_plugins(RenderPlugin);
+    for _ in 0..3 {
+        app.update();
+    }
+    let state = app.world.resource::<RenderState>();
+    assert_eq!((state.frames, state.uploads), (0, 0));
+    assert_eq!(state.error, None);
+}

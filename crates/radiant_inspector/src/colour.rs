@@ -1,8 +1,10 @@
 //! Colour widgets: linear RGB, sRGB hex and HDR intensity editors, the CIE 1931 xy diagram,
 //! and a colour-temperature picker.
 
-use egui::{Align2, Color32, DragValue, FontId, Pos2, Rect, Sense, Shape, Stroke, Ui, Vec2};
+use egui::{Align2, Color32, FontId, Pos2, Rect, Sense, Shape, Stroke, Ui, Vec2};
 use radiant_color::cie;
+
+use crate::inspect::drag;
 
 /// The sRGB hex code (`#rrggbb`) of a linear colour, channels clamped to [0, 1].
 pub fn to_hex(linear: [f64; 3]) -> String {
@@ -74,15 +76,13 @@ pub fn rgb_editor(ui: &mut Ui, id: &str, rgb: &mut [f64; 3], max: f64, hex: &mut
     ui.horizontal(|ui| {
         ui.label("linear");
         for (c, name) in rgb.iter_mut().zip(["R", "G", "B"]) {
-            changed |= ui
-                .add(
-                    DragValue::new(c)
-                        .range(0.0..=max)
-                        .speed(0.002)
-                        .max_decimals(4)
-                        .prefix(format!("{name} ")),
-                )
-                .changed();
+            let (_, edited) = drag(ui, c, |d| {
+                d.range(0.0..=max)
+                    .speed(0.002)
+                    .max_decimals(4)
+                    .prefix(format!("{name} "))
+            });
+            changed |= edited;
         }
         let mut f = rgb.map(|v| v.clamp(0.0, 1.0) as f32);
         if ui.color_edit_button_rgb(&mut f).changed() {
@@ -134,20 +134,23 @@ pub fn hdr_editor(ui: &mut Ui, id: &str, emission: &mut [f64; 3], hex: &mut Stri
     ui.horizontal(|ui| {
         let label = ui.label("HDR intensity");
         let speed = (intensity * 0.01).max(0.01);
-        changed |= ui
-            .add(
-                DragValue::new(&mut intensity)
-                    .range(0.0..=1e6)
-                    .speed(speed)
-                    .max_decimals(3),
-            )
-            .labelled_by(label.id)
-            .changed();
+        let (response, edited) = drag(ui, &mut intensity, |d| {
+            d.range(0.0..=1e6).speed(speed).max_decimals(3)
+        });
+        response.labelled_by(label.id);
+        changed |= edited;
     });
-    if changed {
-        *emission = colour.map(|c| c * intensity);
+    if changed && intensity <= 0.0 && colour != [1.0; 3] {
+        // A colour picked for a surface that does not emit yet: make it glow at 1.
+        intensity = 1.0;
     }
-    changed
+    let new = colour.map(|c| c * intensity);
+    if changed && new != *emission && new.iter().all(|v| v.is_finite()) {
+        *emission = new;
+        true
+    } else {
+        false
+    }
 }
 
 /// Draws the CIE 1931 xy diagram: the spectral locus with wavelength marks, the sRGB gamut
@@ -285,7 +288,8 @@ pub fn chromaticity_diagram(
             text,
         );
     }
-    let picked = if response.clicked() || response.dragged() {
+    // A click, or a drag that moved: holding the button still writes nothing.
+    let picked = if response.clicked() || response.drag_delta() != Vec2::ZERO {
         response.interact_pointer_pos().map(from_screen)
     } else {
         None
@@ -299,15 +303,10 @@ pub fn kelvin_picker(ui: &mut Ui, kelvin: &mut f64) -> Option<[f64; 3]> {
     let mut out = None;
     ui.horizontal(|ui| {
         let label = ui.label("temperature");
-        let changed = ui
-            .add(
-                DragValue::new(kelvin)
-                    .range(1000.0..=40000.0)
-                    .speed(20.0)
-                    .suffix(" K"),
-            )
-            .labelled_by(label.id)
-            .changed();
+        let (response, changed) = drag(ui, kelvin, |d| {
+            d.range(1000.0..=40000.0).speed(20.0).suffix(" K")
+        });
+        response.labelled_by(label.id);
         if let Some((_, rgb)) = cie::blackbody_color(*kelvin) {
             let (r, _) = ui.allocate_exact_size(Vec2::new(28.0, 14.0), Sense::hover());
             ui.painter().rect_filled(r, 2.0, color32(rgb));

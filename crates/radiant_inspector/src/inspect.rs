@@ -2,7 +2,7 @@
 //! (`let Self { a, b, .. }` is never used), so a new field breaks the build until it is shown
 //! or explicitly left out here.
 
-use egui::{ComboBox, DragValue, Slider, Ui};
+use egui::{ComboBox, DragValue, Slider, SliderClamping, Ui, emath::Numeric};
 use radiant_color::Tonemap;
 use radiant_post::bloom::{Bloom, BloomComposite, BloomMethod};
 use radiant_post::blur::GaussianBlur;
@@ -16,6 +16,37 @@ use radiant_render::ssao::Ssao;
 pub trait Inspect {
     /// Draws every field; `true` when the user changed one.
     fn inspect(&mut self, ui: &mut Ui) -> bool;
+}
+
+/// A slider that clamps only what the user enters, never the value it is shown (so showing a
+/// value outside the range writes nothing back), and reports a change only when the value
+/// differs.
+pub(crate) fn slider<N: Numeric>(
+    ui: &mut Ui,
+    value: &mut N,
+    range: std::ops::RangeInclusive<N>,
+    text: &str,
+) -> bool {
+    let before = *value;
+    ui.add(
+        Slider::new(value, range)
+            .clamping(SliderClamping::Edits)
+            .text(text),
+    );
+    value.to_f64() != before.to_f64()
+}
+
+/// A drag value with the same rules as [`slider`]: `configure` sets its range, speed and text.
+/// Returns the response (to label it) and whether the value changed.
+pub(crate) fn drag<N: Numeric>(
+    ui: &mut Ui,
+    value: &mut N,
+    configure: impl for<'a> FnOnce(DragValue<'a>) -> DragValue<'a>,
+) -> (egui::Response, bool) {
+    let before = value.to_f64();
+    let response = ui.add(configure(DragValue::new(value)).clamp_existing_to_range(false));
+    let changed = value.to_f64() != before;
+    (response, changed)
 }
 
 fn combo<T: PartialEq + Copy>(
@@ -40,9 +71,7 @@ impl Inspect for Tonemapping {
     fn inspect(&mut self, ui: &mut Ui) -> bool {
         let Self { operator, exposure } = self;
         let mut changed = combo(ui, "operator", operator, &Tonemap::ALL, |t| t.name());
-        changed |= ui
-            .add(Slider::new(exposure, -8.0..=8.0).text("exposure (EV)"))
-            .changed();
+        changed |= slider(ui, exposure, -8.0..=8.0, "exposure (EV)");
         changed
     }
 }
@@ -79,22 +108,12 @@ impl Inspect for Bloom {
                 BloomComposite::Additive => "additive",
             },
         );
-        c |= ui
-            .add(Slider::new(intensity, 0.0..=1.0).text("intensity"))
-            .changed();
-        c |= ui
-            .add(Slider::new(threshold, 0.0..=16.0).text("threshold"))
-            .changed();
-        c |= ui.add(Slider::new(knee, 0.0..=1.0).text("knee")).changed();
-        c |= ui
-            .add(Slider::new(mip_count, 1..=8).text("mip levels"))
-            .changed();
-        c |= ui
-            .add(Slider::new(scatter, 0.0..=1.0).text("scatter"))
-            .changed();
-        c |= ui
-            .add(Slider::new(gaussian_rounds, 1..=16).text("Gaussian rounds"))
-            .changed();
+        c |= slider(ui, intensity, 0.0..=1.0, "intensity");
+        c |= slider(ui, threshold, 0.0..=16.0, "threshold");
+        c |= slider(ui, knee, 0.0..=1.0, "knee");
+        c |= slider(ui, mip_count, 1..=8, "mip levels");
+        c |= slider(ui, scatter, 0.0..=1.0, "scatter");
+        c |= slider(ui, gaussian_rounds, 1..=8, "Gaussian rounds");
         c
     }
 }
@@ -107,18 +126,14 @@ impl Inspect for Ssao {
             intensity,
             samples,
         } = self;
-        let mut c = ui
-            .add(Slider::new(radius, 0.01..=2.0).text("radius (m)"))
-            .changed();
-        c |= ui
-            .add(Slider::new(bias, 0.0..=0.1).text("bias (m)"))
-            .changed();
-        c |= ui
-            .add(Slider::new(intensity, 0.0..=4.0).text("intensity"))
-            .changed();
-        c |= ui
-            .add(Slider::new(samples, 1..=64).text("samples"))
-            .changed();
+        // Validation: radius > 0, 0 ≤ bias < radius, intensity in (0, 8], 1..=64 samples.
+        let mut c = slider(ui, radius, 0.01..=2.0, "radius (m)");
+        c |= slider(ui, bias, 0.0..=0.1, "bias (m)");
+        c |= slider(ui, intensity, 0.05..=8.0, "intensity");
+        c |= slider(ui, samples, 1..=64, "samples");
+        if c && *bias >= *radius {
+            *bias = *radius * 0.5;
+        }
         c
     }
 }
@@ -141,9 +156,7 @@ impl Inspect for Sobel {
                 EdgeSource::Normal => "normal",
             },
         );
-        c |= ui
-            .add(Slider::new(threshold, 0.0..=4.0).text("threshold"))
-            .changed();
+        c |= slider(ui, threshold, 0.01..=4.0, "threshold");
         ui.horizontal(|ui| {
             c |= ui.color_edit_button_rgb(edge_color).changed();
             ui.label("edge colour");
@@ -159,11 +172,13 @@ impl Inspect for GaussianBlur {
             taps,
             passes,
         } = self;
-        let mut c = ui
-            .add(Slider::new(sigma, 0.1..=16.0).text("sigma (px)"))
-            .changed();
-        c |= ui.add(Slider::new(taps, 1..=63).text("taps")).changed();
-        c |= ui.add(Slider::new(passes, 1..=8).text("passes")).changed();
+        let mut c = slider(ui, sigma, 0.1..=16.0, "sigma (px)");
+        if slider(ui, taps, 1..=63, "taps (odd)") {
+            // Validation wants an odd count: round an even one up.
+            *taps |= 1;
+            c = true;
+        }
+        c |= slider(ui, passes, 1..=8, "passes");
         c
     }
 }
@@ -232,15 +247,11 @@ impl Inspect for radiant_radiosity::BakeParams {
                 c = true;
             }
             if !auto {
-                c |= ui
-                    .add(
-                        DragValue::new(&mut mesh.patch_size)
-                            .range(1e-3..=1e3)
-                            .speed(0.005)
-                            .suffix(" m"),
-                    )
-                    .labelled_by(toggle.id)
-                    .changed();
+                let (response, changed) = drag(ui, &mut mesh.patch_size, |d| {
+                    d.range(1e-3..=1e3).speed(0.005).suffix(" m")
+                });
+                response.labelled_by(toggle.id);
+                c |= changed;
             }
         });
         ui.horizontal(|ui| {
@@ -252,16 +263,11 @@ impl Inspect for radiant_radiosity::BakeParams {
             }
             if let Some(t) = time_limit {
                 let mut s = t.as_secs_f64();
-                if ui
-                    .add(
-                        DragValue::new(&mut s)
-                            .range(0.05..=3600.0)
-                            .speed(0.1)
-                            .suffix(" s"),
-                    )
-                    .labelled_by(toggle.id)
-                    .changed()
-                {
+                let (response, changed) = drag(ui, &mut s, |d| {
+                    d.range(0.05..=3600.0).speed(0.1).suffix(" s")
+                });
+                response.labelled_by(toggle.id);
+                if changed && s.is_finite() && s > 0.0 {
                     *t = std::time::Duration::from_secs_f64(s);
                     c = true;
                 }

@@ -3,7 +3,7 @@
 //! what they touched).
 
 use bevy_ecs::prelude::*;
-use egui::{Color32, DragValue, RichText, Slider, Ui};
+use egui::{Color32, RichText, Ui};
 use egui_plot::{Line, Plot, PlotPoints};
 use radiant_ecs::bake::{BakeControl, BakePhase, BakeStatus, RadiosityBake};
 use radiant_ecs::render::{Bloom, DebugView, GaussianBlur, RenderState, Sobel, Ssao, Tonemapping};
@@ -104,7 +104,10 @@ pub fn colour_panel(ui: &mut Ui, world: &mut World, state: &mut InspectorState) 
     if let Some(xy) = chromaticity_diagram(ui, 260.0, &points) {
         let y = colour::luminance_y(reflectance).max(0.05);
         if let Some((rgb, outside)) = from_chromaticity(xy, y) {
-            reflectance = rgb.map(|c| c.min(0.999));
+            // Below 1 (a reflectance), scaled as a whole so the chromaticity is kept.
+            let peak = rgb.iter().copied().fold(0.0, f64::max);
+            let k = peak.max(0.999) / 0.999;
+            reflectance = rgb.map(|c| c / k);
             state.picked_xy = outside.then_some((xy, reflectance));
             state.hex_base.clear();
             changed = true;
@@ -121,11 +124,15 @@ pub fn colour_panel(ui: &mut Ui, world: &mut World, state: &mut InspectorState) 
             ),
         );
     }
-    if changed && let Some(mut m) = world.get_mut::<Material>(entity) {
-        *m = Material {
-            reflectance,
-            emission,
-        };
+    let edited = Material {
+        reflectance,
+        emission,
+    };
+    if changed
+        && edited != material
+        && let Some(mut m) = world.get_mut::<Material>(entity)
+    {
+        *m = edited;
     }
 }
 
@@ -139,7 +146,8 @@ pub fn lights_panel(ui: &mut Ui, world: &mut World, state: &mut InspectorState) 
         ui.label("No punctual lights. Emissive surfaces are edited in the Colour panel.");
         return;
     }
-    for (entity, mut light) in lights {
+    for (entity, original) in lights {
+        let mut light = original.clone();
         let mut changed = false;
         egui::CollapsingHeader::new(light.name.clone())
             .id_salt(entity)
@@ -171,15 +179,11 @@ pub fn lights_panel(ui: &mut Ui, world: &mut World, state: &mut InspectorState) 
                 ui.horizontal(|ui| {
                     let label = ui.label("intensity");
                     let speed = (*intensity * 0.01).max(0.01);
-                    changed |= ui
-                        .add(
-                            DragValue::new(intensity)
-                                .range(0.0..=1e7)
-                                .speed(speed)
-                                .suffix(unit),
-                        )
-                        .labelled_by(label.id)
-                        .changed();
+                    let (response, edited) = crate::inspect::drag(ui, intensity, |d| {
+                        d.range(0.0..=1e7).speed(speed).suffix(unit)
+                    });
+                    response.labelled_by(label.id);
+                    changed |= edited;
                 });
                 if !matches!(kind, LightKind::Directional) {
                     ui.horizontal(|ui| {
@@ -190,10 +194,11 @@ pub fn lights_panel(ui: &mut Ui, world: &mut World, state: &mut InspectorState) 
                             changed = true;
                         }
                         if let Some(r) = range {
-                            changed |= ui
-                                .add(DragValue::new(r).range(1e-3..=1e6).speed(0.05).suffix(" m"))
-                                .labelled_by(toggle.id)
-                                .changed();
+                            let (response, edited) = crate::inspect::drag(ui, r, |d| {
+                                d.range(1e-3..=1e6).speed(0.05).suffix(" m")
+                            });
+                            response.labelled_by(toggle.id);
+                            changed |= edited;
                         }
                     });
                 }
@@ -204,9 +209,9 @@ pub fn lights_panel(ui: &mut Ui, world: &mut World, state: &mut InspectorState) 
                 {
                     let mut inner = inner_cone_angle.to_degrees();
                     let mut outer = outer_cone_angle.to_degrees();
-                    let a = ui.add(Slider::new(&mut inner, 0.0..=90.0).text("inner cone (°)"));
-                    let b = ui.add(Slider::new(&mut outer, 0.0..=90.0).text("outer cone (°)"));
-                    if a.changed() || b.changed() {
+                    let a = crate::inspect::slider(ui, &mut inner, 0.0..=90.0, "inner cone (°)");
+                    let b = crate::inspect::slider(ui, &mut outer, 0.0..=90.0, "outer cone (°)");
+                    if a || b {
                         // glTF: 0 ≤ inner < outer ≤ π/2.
                         outer = outer.max(0.1);
                         inner = inner.min(outer - 0.05).max(0.0);
@@ -216,7 +221,10 @@ pub fn lights_panel(ui: &mut Ui, world: &mut World, state: &mut InspectorState) 
                     }
                 }
             });
-        if changed && let Some(mut l) = world.get_mut::<PunctualLight>(entity) {
+        if changed
+            && light != original
+            && let Some(mut l) = world.get_mut::<PunctualLight>(entity)
+        {
             l.0 = light;
         }
     }
@@ -229,7 +237,7 @@ fn camera_entity(world: &mut World) -> Option<Entity> {
 
 /// An effect component on the camera and the settings it wraps.
 trait EffectComponent: Component<Mutability = bevy_ecs::component::Mutable> + Copy + Default {
-    type Settings: Inspect + Copy;
+    type Settings: Inspect + Copy + PartialEq;
     fn settings(&self) -> Self::Settings;
     fn wrap(settings: Self::Settings) -> Self;
 }
@@ -266,9 +274,11 @@ fn effect<C: EffectComponent>(ui: &mut Ui, world: &mut World, camera: Entity, na
         return;
     }
     if let Some(c) = current {
-        let mut settings = c.settings();
+        let before = c.settings();
+        let mut settings = before;
         ui.indent(name, |ui| {
             if settings.inspect(ui)
+                && settings != before
                 && let Some(mut slot) = world.get_mut::<C>(camera)
             {
                 *slot = C::wrap(settings);
@@ -319,16 +329,20 @@ fn phase_name(p: BakePhase) -> &'static str {
 /// Radiosity: method, patch size and budget (a change rebakes); pause, resume, rebake,
 /// cancel; progress, ETA and the stale flag; the estimated error against time.
 pub fn radiosity_panel(ui: &mut Ui, world: &mut World, _state: &mut InspectorState) {
-    let Some(mut settings) = world.get_resource::<RadiosityBake>().cloned() else {
-        ui.label("No bake requested (insert a RadiosityBake resource to bake).");
+    let (Some(mut settings), Some(status), Some(control)) = (
+        world.get_resource::<RadiosityBake>().cloned(),
+        world.get_resource::<BakeStatus>().cloned(),
+        world.get_resource::<BakeControl>().copied(),
+    ) else {
+        ui.label("No bake in this world (add the bake plugin and a RadiosityBake resource).");
         return;
     };
-    if settings.params.inspect(ui) {
+    let before = settings.params;
+    if settings.params.inspect(ui) && settings.params != before {
         world.insert_resource(settings);
         world.resource_mut::<BakeControl>().rebake();
     }
-    let status = world.resource::<BakeStatus>().clone();
-    let paused = world.resource::<BakeControl>().is_paused();
+    let paused = control.is_paused();
     ui.horizontal(|ui| {
         let mut control = None;
         if paused {

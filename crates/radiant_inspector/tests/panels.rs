@@ -297,3 +297,49 @@ fn performance_panel_shows_timings() {
     h.get_by_label("3.750 ms");
     snapshot(&mut h, "performance_panel");
 }
+
+#[test]
+fn looking_at_a_panel_writes_nothing() {
+    // Values a widget cannot show in its range (glTF's default white reflectance 1.0, a time
+    // budget over the slider's hour) must not be clamped and written back just by being shown:
+    // that would rebake every frame.
+    for tab in Tab::ALL {
+        let mut h = harness(tab);
+        {
+            let w = &mut h.state_mut().world;
+            let mut q = w.query::<&mut Material>();
+            for mut m in q.iter_mut(w) {
+                m.reflectance = [1.0; 3];
+            }
+            w.resource_mut::<RadiosityBake>().params.time_limit =
+                Some(std::time::Duration::from_secs(4000));
+            w.clear_trackers();
+        }
+        h.run_steps(5);
+        let w = &mut h.state_mut().world;
+        let changed_materials = w.query_filtered::<(), Changed<Material>>().iter(w).count();
+        let changed_lights = w
+            .query_filtered::<(), Changed<PunctualLight>>()
+            .iter(w)
+            .count();
+        let changed_camera = w
+            .query_filtered::<(), Or<(
+                Changed<Tonemapping>,
+                Changed<Bloom>,
+                Changed<Ssao>,
+                Changed<radiant_ecs::render::DebugView>,
+            )>>()
+            .iter(w)
+            .count();
+        assert_eq!(
+            (changed_materials, changed_lights, changed_camera),
+            (0, 0, 0),
+            "{tab:?} wrote without input"
+        );
+        assert!(
+            !w.is_resource_changed::<RadiosityBake>(),
+            "{tab:?} rewrote the bake settings"
+        );
+        assert!(!w.resource::<BakeControl>().is_paused());
+    }
+}

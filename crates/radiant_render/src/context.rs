@@ -152,9 +152,9 @@ impl GpuContext {
         Ok(())
     }
 
-    /// Waits for the GPU and returns the validation errors raised since the last call.
-    pub fn take_errors(&self) -> Result<(), RenderError> {
-        let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
+    /// The validation errors recorded so far, without waiting for the GPU (errors of work still
+    /// in flight show up in a later call).
+    pub fn poll_errors(&self) -> Result<(), RenderError> {
         let errors = match self.errors.lock() {
             Ok(mut v) => std::mem::take(&mut *v),
             Err(_) => vec!["error log poisoned".into()],
@@ -164,6 +164,12 @@ impl GpuContext {
         } else {
             Err(RenderError::Gpu(errors.join("; ")))
         }
+    }
+
+    /// Waits for the GPU and returns the validation errors raised since the last call.
+    pub fn take_errors(&self) -> Result<(), RenderError> {
+        let _ = self.device.poll(wgpu::PollType::wait_indefinitely());
+        self.poll_errors()
     }
 }
 

@@ -1,0 +1,113 @@
+//! `radiant view`: the window (feature `viewer`).
+
+use std::path::PathBuf;
+
+use clap::Args;
+
+use crate::{SolveArgs, parse_ff, parse_solver};
+
+/// `radiant view`.
+#[derive(Args, Debug)]
+pub(crate) struct ViewArgs {
+    /// A glTF 2.0 file (.gltf or .glb); default: the builtin Cornell box.
+    #[arg(conflicts_with = "builtin")]
+    pub(crate) scene: Option<PathBuf>,
+    /// A builtin scene instead of a file: cornell-box.
+    #[arg(long)]
+    pub(crate) builtin: Option<String>,
+    /// Window size in logical pixels, WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720")]
+    pub(crate) size: String,
+    /// Start with the inspector hidden (Tab or F1 toggles it).
+    #[arg(long)]
+    pub(crate) no_inspector: bool,
+    /// Exit after this many frames (for scripted runs and screenshots).
+    #[arg(long)]
+    pub(crate) frames: Option<u64>,
+    /// The bake's checkpoint: resumed from when it fits the scene, written on close.
+    #[arg(long, default_value = "radiant-out/viewer.checkpoint")]
+    pub(crate) checkpoint: PathBuf,
+    /// Solver: jacobi, gauss-seidel, southwell or direct.
+    #[arg(long, default_value = "gauss-seidel")]
+    pub(crate) method: String,
+    /// Form factors: analytic, hemicube, raycast or montecarlo.
+    #[arg(long, default_value = "analytic")]
+    pub(crate) form_factors: String,
+    /// Light-map texels along a triangle's side (4 to 256).
+    #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u32).range(4..=256))]
+    pub(crate) lightmap_cell: u32,
+    #[command(flatten)]
+    pub(crate) solve: SolveArgs,
+}
+
+fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or_else(|| anyhow::anyhow!("--size {s}: expected WIDTHxHEIGHT"))?;
+    let (w, h): (u32, u32) = (w.trim().parse()?, h.trim().parse()?);
+    anyhow::ensure!(
+        (1..=16384).contains(&w) && (1..=16384).contains(&h),
+        "--size {s}: each side must be 1 to 16384"
+    );
+    Ok((w, h))
+}
+
+/// Opens the viewer. `Err` with a [`radiant_viewer::ViewerError::NoDisplay`] inside when no
+/// window can be opened (the caller may fall back to the headless path).
+pub(crate) fn run(args: &ViewArgs) -> anyhow::Result<()> {
+    let (scene, name) = match (&args.scene, &args.builtin) {
+        (Some(path), None) => (
+            radiant::scene::load_gltf(path)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?,
+            path.display().to_string(),
+        ),
+        (_, builtin) => {
+            let name = builtin.clone().unwrap_or_else(|| "cornell-box".into());
+            (radiant::scene::builtin(&name)?, name)
+        }
+    };
+    let params = args
+        .solve
+        .params(parse_solver(&args.method)?, parse_ff(&args.form_factors)?)?;
+    args.solve.init_threads()?;
+    if let Some(dir) = args
+        .checkpoint
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+    {
+        std::fs::create_dir_all(dir)?;
+    }
+    let mut options = radiant_viewer::ViewerOptions::new(scene);
+    options.title = format!("Radiant: {name}");
+    options.size = parse_size(&args.size)?;
+    options.inspector = !args.no_inspector;
+    options.exit_after_frames = args.frames;
+    options.lightmap_cell = args.lightmap_cell;
+    options.bake = radiant::ecs::bake::RadiosityBake {
+        params,
+        checkpoint: Some(args.checkpoint.clone()),
+        threads: args.solve.threads,
+        ..Default::default()
+    };
+    let report = radiant_viewer::run(options)?;
+    println!(
+        "radiant viewer: {} frames, median {} ms per frame; bake {}{}",
+        report.frames,
+        report
+            .median_frame_ms
+            .map_or_else(|| "n/a".into(), |m| format!("{m:.1}")),
+        report.bake_phase,
+        report
+            .checkpoint
+            .map_or_else(String::new, |p| format!(", checkpoint {}", p.display()))
+    );
+    if !report.pass_ms.is_empty() {
+        let passes: Vec<String> = report
+            .pass_ms
+            .iter()
+            .map(|(n, ms)| format!("{n} {ms:.2}"))
+            .collect();
+        println!("pass times (ms): {}", passes.join(", "));
+    }
+    Ok(())
+}
