@@ -5,12 +5,24 @@ use std::time::Instant;
 
 use anyhow::Context;
 use indicatif::{ProgressBar, ProgressStyle};
-use radiant::radiosity::metrics::{self, CORNELL_BOX_REFERENCE};
+use radiant::radiosity::metrics::{
+    self, CORNELL_BOX_REFERENCE, CORNELL_POINTS_RGB, CORNELL_POINTS_SPECTRAL,
+};
 use radiant::radiosity::{BakeEvent, lightmap};
 use serde_json::json;
 
 use crate::output::{self, ensure_dir, write_atomic};
 use crate::{BakeArgs, SceneArgs, load_scene, parse_ff, parse_solver};
+
+/// A point comparison as JSON: mean, max and each point.
+fn points_json(c: &metrics::PointComparison) -> serde_json::Value {
+    let points: Vec<serde_json::Value> = c
+        .points
+        .iter()
+        .map(|p| json!({ "point": p.name, "ours": p.ours, "reference": p.reference, "relative_error": p.rel }))
+        .collect();
+    json!({ "mean_rel": c.mean_rel, "max_rel": c.max_rel, "reference_scale": c.scale, "points": points })
+}
 
 /// A per-surface reference and where it came from.
 pub type NamedReference = (String, Vec<(String, [f64; 3])>);
@@ -179,6 +191,20 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         )),
         None => None,
     };
+    // The builtin Cornell box also has path-traced radiosity at 24 surface points (RGB and
+    // spectral Mitsuba 3 runs): pointwise errors, not just surface means.
+    let cornell = args.scene.builtin.as_deref() == Some("cornell-box");
+    let rgb_points = if cornell {
+        let refs = metrics::parse_point_csv(CORNELL_POINTS_RGB, 1e-3)?;
+        Some(metrics::compare_points(
+            &result.mesh,
+            &result.radiosity,
+            &refs,
+            None,
+        )?)
+    } else {
+        None
+    };
     let out = &args.out;
     let mut result = result;
     let mut spectral_json = serde_json::Value::Null;
@@ -225,6 +251,19 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
             "seconds": seconds,
             "relative_difference_from_rgb": { "mean": mean, "max": worst, "per_surface": diffs },
         });
+        if cornell {
+            let refs = metrics::parse_point_csv(CORNELL_POINTS_SPECTRAL, 1e-3)?;
+            let c =
+                metrics::compare_points(&result.mesh, &sp.radiosity, &refs, Some("light_centre"))?;
+            println!(
+                "spectral vs Mitsuba 3 spectral path tracing at {} surface points: mean {:.2} %, max {:.2} % \
+                 (reference scaled to our light's luminance)",
+                c.points.len(),
+                c.mean_rel * 100.0,
+                c.max_rel * 100.0
+            );
+            spectral_json["vs_path_traced_points"] = points_json(&c);
+        }
         write_atomic(
             &out.join("surfaces_rgb.csv"),
             output::surfaces_csv(&result.surfaces).as_bytes(),
@@ -264,6 +303,9 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     if !spectral_json.is_null() {
         report["spectral"] = spectral_json;
     }
+    if let Some(c) = &rgb_points {
+        report["points_vs_path_traced"] = points_json(c);
+    }
     write_atomic(
         &out.join("report.json"),
         serde_json::to_string_pretty(&report)?.as_bytes(),
@@ -293,6 +335,14 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     );
     for w in &r.warnings {
         println!("warning: {w}");
+    }
+    if let Some(c) = &rgb_points {
+        println!(
+            "RGB bake vs Mitsuba 3 RGB path tracing at {} surface points: mean {:.2} %, max {:.2} %",
+            c.points.len(),
+            c.mean_rel * 100.0,
+            c.max_rel * 100.0
+        );
     }
     if let Some((name, e)) = &error {
         println!(

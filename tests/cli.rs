@@ -261,6 +261,15 @@ fn spectral_bake_compares_with_rgb() {
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report"))
             .expect("json");
     assert_eq!(report["spectral"]["bands"], 8);
+    // The builtin box is compared with path tracing at surface points too, RGB and spectral.
+    for key in [
+        &report["points_vs_path_traced"],
+        &report["spectral"]["vs_path_traced_points"],
+    ] {
+        let mean = key["mean_rel"].as_f64().expect("mean_rel");
+        assert!(mean.is_finite() && mean > 0.0 && mean < 0.5, "{key}");
+        assert!(key["points"].as_array().expect("points").len() >= 23);
+    }
     assert!(
         report["spectral"]["relative_difference_from_rgb"]["mean"]
             .as_f64()

@@ -194,3 +194,191 @@ pub fn parse_reference_csv(text: &str) -> Result<Vec<(String, Rgb)>, BakeError> 
 /// 2^25 samples per pixel, `llvm_ad_rgb`, unbounded depth (`assets/reference/`).
 pub const CORNELL_BOX_REFERENCE: &str =
     include_str!("../../../assets/reference/cornell_box_mitsuba_irradiance.csv");
+
+/// Mitsuba 3 radiance meters 1 mm off 24 points of the builtin Cornell box (quad centres and
+/// five probes), bitterli RGB materials, `scalar_rgb`, 2^20 samples each
+/// (`tools/make_cornell_point_references.sh`). Positions in mm.
+pub const CORNELL_POINTS_RGB: &str =
+    include_str!("../../../assets/reference/cornell_points_rgb_mitsuba.csv");
+/// The same points with the measured spectra (`scalar_spectral`): the light's spectrum is
+/// relative, so compare after scaling to a light point ([`compare_points`]).
+pub const CORNELL_POINTS_SPECTRAL: &str =
+    include_str!("../../../assets/reference/cornell_points_spectral_mitsuba.csv");
+
+/// A path-traced radiosity at one surface point: Mitsuba radiance meters 1 mm off the surface,
+/// looking back into it (`tools`: `cornell_mitsuba.py points`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointReference {
+    /// The point's name (`left_wall_centre`, `floor_under_light`, ...).
+    pub name: String,
+    /// Position on the surface, scene units.
+    pub position: glam::DVec3,
+    /// Unit normal of the surface there.
+    pub normal: glam::DVec3,
+    /// Radiosity in emissive units (the meter's outgoing radiance).
+    pub radiosity: Rgb,
+}
+
+/// Parses a `point,x_mm,y_mm,z_mm,nx,ny,nz,L_r,L_g,L_b,...` CSV; positions are multiplied by
+/// `mm_to_scene` (1e-3 for a scene in metres).
+pub fn parse_point_csv(text: &str, mm_to_scene: f64) -> Result<Vec<PointReference>, BakeError> {
+    let mut lines = text
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with('#'));
+    let header: Vec<&str> = lines
+        .next()
+        .ok_or_else(|| BakeError::Reference("empty point reference".into()))?
+        .split(',')
+        .map(str::trim)
+        .collect();
+    let want = [
+        "x_mm", "y_mm", "z_mm", "nx", "ny", "nz", "L_r", "L_g", "L_b",
+    ];
+    let cols: Vec<usize> =
+        want.iter()
+            .map(|w| {
+                header.iter().position(|h| h == w).ok_or_else(|| {
+                    BakeError::Reference(format!("point reference: no column '{w}'"))
+                })
+            })
+            .collect::<Result<_, _>>()?;
+    let mut out = Vec::new();
+    for (k, line) in lines.enumerate() {
+        let f: Vec<&str> = line.split(',').map(str::trim).collect();
+        let v: Vec<f64> = cols
+            .iter()
+            .map(|&c| {
+                f.get(c)
+                    .and_then(|s| s.parse::<f64>().ok())
+                    .filter(|x| x.is_finite())
+                    .ok_or_else(|| {
+                        BakeError::Reference(format!("point row {}: bad column {}", k + 2, c + 1))
+                    })
+            })
+            .collect::<Result<_, _>>()?;
+        let normal = glam::DVec3::new(v[3], v[4], v[5])
+            .try_normalize()
+            .ok_or_else(|| BakeError::Reference(format!("point row {}: zero normal", k + 2)))?;
+        out.push(PointReference {
+            name: f.first().copied().unwrap_or_default().to_string(),
+            position: glam::DVec3::new(v[0], v[1], v[2]) * mm_to_scene,
+            normal,
+            radiosity: [v[6], v[7], v[8]],
+        });
+    }
+    Ok(out)
+}
+
+/// The element whose triangle contains `p` seen along `normal` and lies nearest to it (at most
+/// 0.5 % of the scene's size off its plane: published quads such as the Cornell box's left
+/// wall are not quite planar), facing along `normal`; `None` if no element does.
+pub fn element_at(mesh: &Mesh, p: glam::DVec3, normal: glam::DVec3) -> Option<usize> {
+    let q = mesh.frame.to_local(p);
+    let (plane_tol, edge_tol) = (5e-3, 1e-6);
+    let mut best: Option<(usize, f64)> = None;
+    for (i, &leaf) in mesh.leaves.iter().enumerate() {
+        let node = &mesh.nodes[leaf as usize];
+        if node.normal.dot(normal) < 0.99 {
+            continue;
+        }
+        let off = (q - node.v[0]).dot(node.normal).abs();
+        if off > plane_tol {
+            continue;
+        }
+        // Inside (edges included) by the signs of the three sub-triangle normals.
+        let inside = (0..3).all(|k| {
+            let (a, b) = (node.v[k], node.v[(k + 1) % 3]);
+            (b - a).cross(q - a).dot(node.normal) >= -edge_tol * (b - a).length()
+        });
+        if inside && best.is_none_or(|(_, d)| off < d) {
+            best = Some((i, off));
+        }
+    }
+    best.map(|(i, _)| i)
+}
+
+/// One point of a [`compare_points`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointError {
+    /// The reference point's name.
+    pub name: String,
+    /// Our radiosity at the point (its element's).
+    pub ours: Rgb,
+    /// The reference, after scaling.
+    pub reference: Rgb,
+    /// `Σ_c |ours − ref| / Σ_c ref`.
+    pub rel: f64,
+}
+
+/// Radiosity at reference points against a path tracer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointComparison {
+    /// Every point but the normalising one.
+    pub points: Vec<PointError>,
+    /// Mean of `rel` over the points.
+    pub mean_rel: f64,
+    /// Largest `rel`.
+    pub max_rel: f64,
+    /// The factor the reference was multiplied by (1 unless normalised).
+    pub scale: f64,
+}
+
+/// Compares `radiosity` (per element of `mesh`) with `reference` at its points. With
+/// `normalise_to`, the reference is first scaled so that its luminance at that point equals
+/// ours, and that point is left out: for references whose emitters share only the relative
+/// spectrum with ours (a spectral bake scales emission to the RGB emission's luminance).
+pub fn compare_points(
+    mesh: &Mesh,
+    radiosity: &[Rgb],
+    reference: &[PointReference],
+    normalise_to: Option<&str>,
+) -> Result<PointComparison, BakeError> {
+    let at = |r: &PointReference| -> Result<Rgb, BakeError> {
+        element_at(mesh, r.position, r.normal)
+            .and_then(|e| radiosity.get(e).copied())
+            .ok_or_else(|| BakeError::Reference(format!("no element at point '{}'", r.name)))
+    };
+    let scale = match normalise_to {
+        Some(name) => {
+            let r = reference
+                .iter()
+                .find(|r| r.name == name)
+                .ok_or_else(|| BakeError::Reference(format!("no reference point '{name}'")))?;
+            let (ours, theirs) = (
+                radiant_color::luminance(at(r)?),
+                radiant_color::luminance(r.radiosity),
+            );
+            if !(theirs > 0.0 && ours.is_finite()) {
+                return Err(BakeError::Reference(format!(
+                    "point '{name}' has no luminance to normalise by"
+                )));
+            }
+            ours / theirs
+        }
+        None => 1.0,
+    };
+    let mut points = Vec::new();
+    for r in reference
+        .iter()
+        .filter(|r| Some(r.name.as_str()) != normalise_to)
+    {
+        let ours = at(r)?;
+        let reference = r.radiosity.map(|v| v * scale);
+        let sum: f64 = reference.iter().sum();
+        let diff: f64 = (0..3).map(|c| (ours[c] - reference[c]).abs()).sum();
+        points.push(PointError {
+            name: r.name.clone(),
+            ours,
+            reference,
+            rel: if sum > 0.0 { diff / sum } else { diff },
+        });
+    }
+    let n = points.len().max(1) as f64;
+    Ok(PointComparison {
+        mean_rel: points.iter().map(|p| p.rel).sum::<f64>() / n,
+        max_rel: points.iter().map(|p| p.rel).fold(0.0, f64::max),
+        scale,
+        points,
+    })
+}

@@ -1,0 +1,139 @@
+//! The Cornell box at default settings against Mitsuba 3 radiance meters at 24 surface points
+//! (assets/reference, 2^20 samples each): the RGB bake against the RGB path tracer, and the
+//! 32-band spectral solve with the measured spectra against the spectral path tracer. Points
+//! are compared with the element that contains them, so the discretisation shows, not only
+//! the surface means. Then the spectral effect alone: our spectral/RGB ratio against
+//! Mitsuba's, where the discretisation cancels (16 bands: 0.7 % mean, 3.9 % max on the
+//! saturated walls; 32 bands: 0.3 %, 1.2 %).
+
+mod common;
+
+use std::collections::HashMap;
+
+use radiant_color::cie::Spectrum;
+use radiant_radiosity::BakeParams;
+use radiant_radiosity::metrics::{
+    CORNELL_POINTS_RGB, CORNELL_POINTS_SPECTRAL, compare_points, element_at, parse_point_csv,
+};
+use radiant_radiosity::spectral::{SpectralMaterial, solve_spectral};
+
+fn spectra() -> HashMap<String, SpectralMaterial> {
+    let text = include_str!("../../radiant_color/tests/data/cornell_spectra_reflectance.csv");
+    let table = |name: &str| -> Spectrum {
+        let mut lines = text.lines();
+        let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+        let col = header.iter().position(|h| *h == name).expect("column");
+        let (mut w, mut v) = (Vec::new(), Vec::new());
+        for l in lines {
+            let f: Vec<f64> = l.split(',').map(|x| x.parse().expect("number")).collect();
+            w.push(f[0]);
+            v.push(f[col]);
+        }
+        Spectrum::new(w, v).expect("spectrum")
+    };
+    let mut m = HashMap::new();
+    for name in ["white", "red", "green"] {
+        m.insert(
+            name.to_string(),
+            SpectralMaterial {
+                reflectance: table(name),
+                emission: None,
+            },
+        );
+    }
+    m.insert(
+        "light".into(),
+        SpectralMaterial {
+            reflectance: Spectrum::constant(0.78),
+            emission: Some(
+                Spectrum::new(vec![400.0, 500.0, 600.0, 700.0], vec![0.0, 8.0, 15.6, 18.4])
+                    .expect("spd"),
+            ),
+        },
+    );
+    m
+}
+
+#[test]
+fn cornell_box_matches_path_traced_points_in_rgb_and_spectral() {
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    let r = common::bake(&scene, &BakeParams::default());
+    let rgb_refs = parse_point_csv(CORNELL_POINTS_RGB, 1e-3).expect("rgb points");
+    assert_eq!(rgb_refs.len(), 24);
+    // Every point lies on exactly the surface it names.
+    for p in &rgb_refs {
+        assert!(
+            element_at(&r.mesh, p.position, p.normal).is_some(),
+            "{} is on no element",
+            p.name
+        );
+    }
+    let rgb = compare_points(&r.mesh, &r.radiosity, &rgb_refs, None).expect("compare");
+    let sp = solve_spectral(&r.system, &r.mesh, &scene.surfaces, &spectra(), 32, 1e-6)
+        .expect("spectral");
+    let spec_refs = parse_point_csv(CORNELL_POINTS_SPECTRAL, 1e-3).expect("spectral points");
+    let spectral =
+        compare_points(&r.mesh, &sp.radiosity, &spec_refs, Some("light_centre")).expect("compare");
+    for (label, c) in [("RGB", &rgb), ("spectral", &spectral)] {
+        eprintln!(
+            "{label} vs Mitsuba at {} points: mean {:.2} %, max {:.2} % (scale {:.4})",
+            c.points.len(),
+            c.mean_rel * 100.0,
+            c.max_rel * 100.0,
+            c.scale
+        );
+        for p in &c.points {
+            eprintln!("  {:24} {:6.2} %", p.name, p.rel * 100.0);
+        }
+    }
+    assert!(
+        rgb.mean_rel <= 0.03,
+        "RGB mean {:.2} %",
+        rgb.mean_rel * 100.0
+    );
+    assert!(rgb.max_rel <= 0.10, "RGB max {:.2} %", rgb.max_rel * 100.0);
+    assert!(
+        spectral.mean_rel <= 0.03,
+        "spectral mean {:.2} %",
+        spectral.mean_rel * 100.0
+    );
+    assert!(
+        spectral.max_rel <= 0.10,
+        "spectral max {:.2} %",
+        spectral.max_rel * 100.0
+    );
+    // Isolate the spectral effect: per point and channel, how much the spectral answer differs
+    // from the RGB answer, in our bakes and in Mitsuba's. The discretisation error (the same
+    // mesh in both of ours) cancels; what remains is how well we reproduce "spectra do not
+    // multiply like RGB triples".
+    // Per point, channel errors weighted by the channel's share of the RGB reference: a
+    // channel near zero (blue on the green wall) has a ratio of two noisy small numbers.
+    let mut worst: f64 = 0.0;
+    let mut sum = 0.0;
+    for p in &spectral.points {
+        let q = rgb
+            .points
+            .iter()
+            .find(|q| q.name == p.name)
+            .expect("same points");
+        let total: f64 = q.reference.iter().sum();
+        let e: f64 = (0..3)
+            .map(|c| {
+                let ours = p.ours[c] / q.ours[c];
+                let theirs = p.reference[c] / q.reference[c];
+                (ours - theirs).abs() / theirs * q.reference[c] / total
+            })
+            .sum();
+        eprintln!("  ratio error {:24} {:.2} %", p.name, e * 100.0);
+        worst = worst.max(e);
+        sum += e;
+    }
+    let mean = sum / spectral.points.len() as f64;
+    eprintln!(
+        "spectral/RGB ratio, ours vs Mitsuba's: mean {:.2} %, max {:.2} %",
+        mean * 100.0,
+        worst * 100.0
+    );
+    assert!(mean <= 0.01, "ratio mean {:.2} %", mean * 100.0);
+    assert!(worst <= 0.02, "ratio max {:.2} %", worst * 100.0);
+}
