@@ -1,5 +1,5 @@
 //! The in-editor case, headless: the Cornell box bakes in the background of a bevy_ecs world,
-//! then a wall's colour is edited and the block is moved; each rebake's error timeline is
+//! then a wall's colour is edited, the block is moved and then removed; each rebake's error timeline is
 //! printed, measured against the converged answer, with the main schedule's cost per frame.
 //!
 //! `cargo run --release --example live_rebake [PATCH_SIZE]`
@@ -135,5 +135,29 @@ fn main() -> anyhow::Result<()> {
         s.links_recomputed, s.links, s.builds
     );
     report("move", &snaps, &mut frames);
+
+    // Remove the block: its links go, the links its bounds do not reach are kept.
+    let recomputed_before = app.world.resource::<BakeStatus>().links_recomputed;
+    let block: Vec<Entity> = app
+        .world
+        .query::<(Entity, &Name)>()
+        .iter(&app.world)
+        .filter(|(_, n)| n.as_str().starts_with("short_block"))
+        .map(|(e, _)| e)
+        .collect();
+    for e in block {
+        app.world.despawn(e);
+    }
+    let t0 = Instant::now();
+    let (snaps, mut frames) = run(&mut app, t0);
+    let s = app.world.resource::<BakeStatus>();
+    println!(
+        "
+short block removed: {} of {} links recomputed, {} builds in all",
+        s.links_recomputed - recomputed_before,
+        s.links,
+        s.builds
+    );
+    report("removal", &snaps, &mut frames);
     Ok(())
 }

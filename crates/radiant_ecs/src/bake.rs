@@ -10,7 +10,7 @@
 //! form factors) and solves one sweep (or one shot) per step, so its results do not depend on
 //! timing or thread count. The frame never waits for it. Edits are sent to the worker, which
 //! keeps the links and warm-starts: materials (`Bake::edit_surfaces`), lights
-//! (`Bake::edit_lights`) and rigid moves of static geometry (`Bake::edit_geometry`, which
+//! (`Bake::edit_lights`) and moved, added or removed static geometry (`Bake::edit_geometry`, which
 //! recomputes only the links the move touches); adding or removing static surfaces bakes again.
 //! A bake that converged, or was paused, returns to the world, ready for the next edit or for
 //! resuming; an edit that reaches a worker as it stops is applied on the next start.
@@ -300,11 +300,14 @@ fn apply(
     edit: &Edit,
     tx: &mpsc::Sender<Report>,
 ) -> Result<(), radiant_radiosity::BakeError> {
-    if edit.surfaces.len() != bake.surfaces.len() {
-        // Static surfaces were added or removed: not an edit.
+    let added_or_removed = edit.surfaces.len() != bake.surfaces.len();
+    if added_or_removed && edit.geometry.is_none() {
         return Err(radiant_radiosity::BakeError::NeedsRebuild);
     }
-    bake.edit_surfaces(&edit.surfaces)?;
+    if !added_or_removed {
+        bake.edit_surfaces(&edit.surfaces)?;
+    }
+    // Added or removed surfaces: the geometry edit brings their materials along.
     if let Some(scene) = &edit.geometry {
         // Lights come with the scene.
         let stats = bake.edit_geometry(scene)?;

@@ -274,7 +274,10 @@ fn light_edits_keep_the_links() {
     assert_eq!(scene.lights.len(), 1);
     assert!((scene.lights[0].position.x - 0.15).abs() < 1e-12);
     let want = fresh(&mut app);
-    assert_surfaces_close(&app, &want, 0.02);
+    // The kept links were refined for the first light; a fresh bake refines for the last one,
+    // so the two differ by the refinement tolerance (measured: 2.2 % on the short block's
+    // dim blue channel, under 1 % elsewhere), not by the solve.
+    assert_surfaces_close(&app, &want, 0.03);
 }
 
 #[test]
@@ -345,7 +348,8 @@ fn dynamic_surfaces_stay_out_of_the_bake() {
             }
         }
     }
-    // Making the block static again bakes it in.
+    // Making the block static again bakes it in, by an edit that keeps the links it does not
+    // touch (no second build).
     let mut q = app.world.query::<(Entity, &Name)>();
     let block: Vec<Entity> = q
         .iter(&app.world)
@@ -357,9 +361,71 @@ fn dynamic_surfaces_stay_out_of_the_bake() {
     }
     app.update();
     converge(&mut app);
-    assert_eq!(app.world.resource::<BakeStatus>().builds, 2);
+    let status = app.world.resource::<BakeStatus>().clone();
+    assert_eq!((status.builds, status.geometry_edits), (1, 1), "{status:?}");
     assert_eq!(
         app.world.resource::<BakedLighting>().surfaces.len(),
         scene.surfaces.len()
     );
+}
+
+#[test]
+fn removing_and_adding_static_entities_edits_the_bake_without_a_rebuild() {
+    let mut app = cornell_app(None);
+    converge(&mut app);
+    let block: Vec<Entity> = app
+        .world
+        .query::<(Entity, &Name)>()
+        .iter(&app.world)
+        .filter(|(_, n)| n.as_str().starts_with("short_block"))
+        .map(|(e, _)| e)
+        .collect();
+    assert_eq!(block.len(), 5);
+    // Out of the bake (no longer static), back in, then gone for good.
+    let steps: [(&str, Box<dyn Fn(&mut World)>); 3] = [
+        (
+            "remove Static",
+            Box::new(|w: &mut World| {
+                for &e in &block {
+                    w.entity_mut(e).remove::<Static>();
+                }
+            }),
+        ),
+        (
+            "insert Static",
+            Box::new(|w: &mut World| {
+                for &e in &block {
+                    w.entity_mut(e).insert(Static);
+                }
+            }),
+        ),
+        (
+            "despawn",
+            Box::new(|w: &mut World| {
+                for &e in &block {
+                    w.despawn(e);
+                }
+            }),
+        ),
+    ];
+    for (k, (what, edit)) in steps.iter().enumerate() {
+        edit(&mut app.world);
+        app.update();
+        converge(&mut app);
+        let status = app.world.resource::<BakeStatus>().clone();
+        // Edited in place: still the first build, one more geometry edit, links kept.
+        assert_eq!(
+            (status.builds, status.geometry_edits),
+            (1, k as u64 + 1),
+            "{what}: {status:?}"
+        );
+        assert!(status.links_recomputed > 0, "{what}");
+        let want = fresh(&mut app);
+        assert_eq!(
+            gather_scene(&mut app.world).surfaces.len(),
+            if k == 1 { 19 } else { 14 },
+            "{what}"
+        );
+        assert_surfaces_close(&app, &want, 1e-4);
+    }
 }

@@ -564,13 +564,21 @@ impl Bake {
         result
     }
 
-    /// Moves static geometry rigidly (the same triangles, surfaces and subdivision; new vertex
-    /// positions) and keeps what the move does not touch: the form factors of links whose
-    /// receiver and source did not move and whose shaft misses the moved geometry's old and new
-    /// bounds (see [`links::update`]). Direct light and enclosed elements are computed again,
-    /// and the solve warm-starts from the current solution. Returns
-    /// [`BakeError::NeedsRebuild`] when the edit is not such a move (other triangle counts,
-    /// another subdivision, a changed bounding box of the scene).
+    /// Moves, adds or removes static geometry and keeps what the edit does not touch: the form
+    /// factors of links whose receiver and source were not moved, added or removed and whose
+    /// shaft misses the changed geometry's old and new bounds (see [`links::update`]).
+    ///
+    /// - A rigid move keeps the triangles, surfaces and subdivision; vertices move.
+    /// - Added or removed surfaces (or triangles): triangles are matched to the old ones by
+    ///   surface name and exact position; matched ones keep their elements' links and
+    ///   radiosity, new ones get theirs computed, and the refinement oracle is recomputed as a
+    ///   fresh bake would (links whose visibility sample count changes with it are computed
+    ///   again). Visibility rays are seeded by each node's own triangle
+    ///   ([`Mesh::stable_id`]), so the links equal a fresh bake's bit for bit.
+    ///
+    /// Direct light and enclosed elements are computed again, and the solve warm-starts from
+    /// the current solution. Returns [`BakeError::NeedsRebuild`] when the scene's bounding box
+    /// changed (every local coordinate would) or nothing emits any more.
     pub fn edit_geometry(&mut self, scene: &Scene) -> Result<links::UpdateStats, BakeError> {
         let static_part;
         let scene = if scene.surfaces.iter().any(|s| s.dynamic) {
@@ -580,10 +588,15 @@ impl Bake {
             scene
         };
         validate(scene)?;
-        if !self.has_emitters || scene.surfaces.len() != self.surfaces.len() {
+        if !self.has_emitters || !scene.has_emitters() {
             return Err(BakeError::NeedsRebuild);
         }
         let mesh = Mesh::new(scene, &self.params.mesh)?;
+        if scene.surfaces.len() != self.surfaces.len()
+            || scene.triangles.len() != self.mesh.roots.len()
+        {
+            return self.edit_structure(scene, mesh);
+        }
         let same_shape = mesh.frame.center == self.mesh.frame.center
             && mesh.frame.scale == self.mesh.frame.scale
             && mesh.nodes.len() == self.mesh.nodes.len()
@@ -594,7 +607,7 @@ impl Bake {
                     == (b.first_child, b.leaf_lo, b.leaf_hi, b.root, b.depth)
             });
         if !same_shape {
-            return Err(BakeError::NeedsRebuild);
+            return self.edit_structure(scene, mesh);
         }
         let moved: Vec<bool> = mesh
             .roots
@@ -647,6 +660,7 @@ impl Bake {
                     bhat: &self.bhat,
                     eps: self.eps,
                 },
+                None,
                 &self.params.links,
                 &self.system.links,
                 &moved,
@@ -667,6 +681,172 @@ impl Bake {
             links::UpdateStats::default()
         };
         self.mesh = mesh;
+        self.lights = scene.lights.clone();
+        self.fingerprint = crate::checkpoint::fingerprint(scene, &self.params);
+        self.solver = new_solver(self.params.solver, &self.system, self.params.solver_params);
+        self.solver.warm_start(&self.system, &b);
+        self.last = None;
+        Ok(stats)
+    }
+
+    /// Added or removed triangles (see [`Bake::edit_geometry`]).
+    fn edit_structure(
+        &mut self,
+        scene: &Scene,
+        mesh: Mesh,
+    ) -> Result<links::UpdateStats, BakeError> {
+        if mesh.frame != self.mesh.frame {
+            return Err(BakeError::NeedsRebuild);
+        }
+        let old = &self.mesh;
+        // Old roots by (surface name, exact local vertices).
+        let key = |m: &Mesh, surfaces: &[Surface], r: usize| {
+            let v = m.nodes[m.roots[r] as usize].v;
+            let name = surfaces
+                .get(m.root_surface[r] as usize)
+                .map_or("", |s| s.name.as_str())
+                .to_string();
+            (
+                name,
+                v.map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]),
+            )
+        };
+        let mut by_key = std::collections::HashMap::new();
+        for r in 0..old.roots.len() {
+            by_key.entry(key(old, &self.surfaces, r)).or_insert(r);
+        }
+        // The node range of each root: roots are pushed in order, each with its whole subtree.
+        let range = |m: &Mesh, r: usize| {
+            let lo = m.roots[r] as usize;
+            let hi = m.roots.get(r + 1).map_or(m.nodes.len(), |&x| x as usize);
+            (lo, hi)
+        };
+        let mut matched_old = vec![false; old.roots.len()];
+        let mut new_of_old_node = vec![u32::MAX; old.nodes.len()];
+        let mut old_of_new_leaf = vec![u32::MAX; mesh.element_count()];
+        let mut added = vec![true; mesh.roots.len()];
+        for r in 0..mesh.roots.len() {
+            let Some(&o) = by_key.get(&key(&mesh, &scene.surfaces, r)) else {
+                continue;
+            };
+            let ((nlo, nhi), (olo, ohi)) = (range(&mesh, r), range(old, o));
+            if matched_old[o] || nhi - nlo != ohi - olo {
+                continue;
+            }
+            matched_old[o] = true;
+            added[r] = false;
+            for k in 0..(nhi - nlo) {
+                new_of_old_node[olo + k] = (nlo + k) as u32;
+            }
+            let (nl, ol) = (
+                mesh.nodes[mesh.roots[r] as usize].leaf_lo as usize,
+                old.nodes[old.roots[o] as usize].leaf_lo as usize,
+            );
+            let count = (mesh.nodes[mesh.roots[r] as usize].leaf_hi as usize) - nl;
+            for k in 0..count {
+                old_of_new_leaf[nl + k] = (ol + k) as u32;
+            }
+        }
+        // What changed occludes differently: the bounds of added and removed triangles.
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        let mut grow = |v: [DVec3; 3]| {
+            for p in v {
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+        };
+        for (r, _) in added.iter().enumerate().filter(|(_, a)| **a) {
+            grow(mesh.nodes[mesh.roots[r] as usize].v);
+        }
+        for (o, _) in matched_old.iter().enumerate().filter(|(_, m)| !**m) {
+            grow(old.nodes[old.roots[o] as usize].v);
+        }
+        // The old links in the new numbering, rows sorted by their sources' first leaf (as
+        // `links::update` merges them); links from removed geometry are dropped.
+        let n = mesh.element_count();
+        let mut row = Vec::with_capacity(n + 1);
+        let (mut src, mut ff) = (Vec::new(), Vec::new());
+        row.push(0);
+        let mut pairs: Vec<(u32, u32, f32)> = Vec::new();
+        for &o in &old_of_new_leaf {
+            if o != u32::MAX {
+                let o = o as usize;
+                pairs.clear();
+                for k in self.system.links.row[o]..self.system.links.row[o + 1] {
+                    let s = new_of_old_node[self.system.links.src[k] as usize];
+                    if s != u32::MAX {
+                        pairs.push((mesh.nodes[s as usize].leaf_lo, s, self.system.links.ff[k]));
+                    }
+                }
+                pairs.sort_by_key(|p| (p.0, p.1));
+                for &(_, s, f) in &pairs {
+                    src.push(s);
+                    ff.push(f);
+                }
+            }
+            row.push(src.len());
+        }
+        let translated = links::Links { row, src, ff };
+        // The current solution, carried over to the elements that stay.
+        let b_old = self.radiosity();
+        let b: Vec<Rgb> = old_of_new_leaf
+            .iter()
+            .map(|&o| b_old.get(o as usize).copied().unwrap_or([0.0; 3]))
+            .collect();
+        let bvh = Bvh::new(&mesh.root_triangles_f32());
+        let direct = (!scene.lights.is_empty())
+            .then(|| lights::direct_irradiance(&mesh, &scene.lights, &bvh));
+        let (mut rho, mut source) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        for (i, &id) in mesh.leaves.iter().enumerate() {
+            let root = mesh.nodes[id as usize].root as usize;
+            let s = &scene.surfaces[mesh.root_surface[root] as usize];
+            let mut e = s.emission;
+            if let Some(d) = &direct {
+                for c in 0..3 {
+                    e[c] += s.reflectance[c] * d[i][c] / std::f64::consts::PI;
+                }
+            }
+            rho.push(s.reflectance);
+            source.push(e);
+        }
+        // The oracle a fresh bake of this scene would use, so the links match a fresh bake's.
+        let (bhat, amb) = estimates(&mesh, &rho, &source);
+        let eps = (self.params.links.refinement * amb).max(f64::MIN_POSITIVE);
+        let ctx = FfContext {
+            mesh: &mesh,
+            vis: &bvh,
+            params: self.params.ff,
+        };
+        let method = form_factors::method(self.params.form_factors);
+        // The old oracle in the new numbering: kept links whose sample count changes with the
+        // new oracle are computed again (added nodes have no old estimate: recomputed anyway).
+        let mut old_bhat = vec![0.0; mesh.nodes.len()];
+        for (o, &nn) in new_of_old_node.iter().enumerate() {
+            if nn != u32::MAX {
+                old_bhat[nn as usize] = self.bhat[o];
+            }
+        }
+        let (new_links, stats) = links::update(
+            &ctx,
+            method,
+            Oracle { bhat: &bhat, eps },
+            Some(Oracle {
+                bhat: &old_bhat,
+                eps: self.eps,
+            }),
+            &self.params.links,
+            &translated,
+            &added,
+            (lo, hi),
+        );
+        let dead = enclosed_elements(&mesh, &bvh, self.params.ff.seed);
+        self.system = System::new(&mesh, rho, source, new_links, &dead);
+        self.dead = dead;
+        self.direct = direct;
+        self.bhat = bhat;
+        self.eps = eps;
+        self.mesh = mesh;
+        self.surfaces = scene.surfaces.clone();
         self.lights = scene.lights.clone();
         self.fingerprint = crate::checkpoint::fingerprint(scene, &self.params);
         self.solver = new_solver(self.params.solver, &self.system, self.params.solver_params);
@@ -783,7 +963,8 @@ fn enclosed_elements(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<bool> 
         .map(|leaf| {
             let node = mesh.leaf_node(leaf as u32);
             let (t, b) = crate::form_factors::basis(node.normal);
-            let mut rng = crate::rng::Rng::new(crate::rng::hash(seed ^ 0xDEAD, leaf as u64, 0));
+            let id = mesh.stable_id(mesh.leaves[leaf]);
+            let mut rng = crate::rng::Rng::new(crate::rng::hash(seed ^ 0xDEAD, id, 0));
             let mut back = 0;
             for k in 0..PROBES {
                 let (u1, u2) = (

@@ -172,6 +172,17 @@ fn assemble(n: usize, chunks: Vec<(Vec<u32>, Vec<u32>, Vec<f32>)>) -> Links {
 }
 
 #[allow(clippy::too_many_arguments)]
+/// Visibility samples of a link that carries `transport`: one per `eps`, at most
+/// `params.max_samples`.
+fn samples_for(transport: f64, eps: f64, params: &LinkParams) -> u8 {
+    let want = (transport / eps).ceil();
+    if want.is_finite() {
+        want.clamp(1.0, f64::from(params.max_samples.max(1))) as u8
+    } else {
+        1
+    }
+}
+
 fn refine(
     mesh: &Mesh,
     leaf: u32,
@@ -184,15 +195,6 @@ fn refine(
 ) {
     let r = mesh.leaf_node(leaf);
     let (x, n) = (r.centroid, r.normal);
-    let max_samples = f64::from(params.max_samples.max(1));
-    let samples_for = |transport: f64, eps: f64| -> u8 {
-        let want = (transport / eps).ceil();
-        if want.is_finite() {
-            want.clamp(1.0, max_samples) as u8
-        } else {
-            1
-        }
-    };
     stack.clear();
     stack.extend(mesh.roots.iter().rev().copied());
     while let Some(s) = stack.pop() {
@@ -214,7 +216,7 @@ fn refine(
             } else {
                 above_patch
             };
-        let nsamples = samples_for(t, oracle.eps);
+        let nsamples = samples_for(t, oracle.eps, params);
         if split {
             for k in (0..4).rev() {
                 stack.push(node.first_child + k);
@@ -283,11 +285,15 @@ pub fn shaft_hits_box(t: &[DVec3; 4], lo: DVec3, hi: DVec3) -> bool {
 /// again with the same oracle, so unmoved pairs keep their structure; links missing from the
 /// old row (fully occluded then) are computed again, as is everything touching moved geometry.
 /// Per-link methods (analytic, ray-cast) recompute only those links; the others recompute the
-/// whole row when any of its links needs it.
+/// whole row when any of its links needs it. With `old_oracle` (the oracle the old links were
+/// built with, in the new node numbering), a kept link whose visibility sample count would
+/// differ under the new oracle is computed again too, so the result equals a fresh build.
+#[expect(clippy::too_many_arguments, reason = "the inputs of a link update")]
 pub fn update(
     ctx: &FfContext,
     method: &dyn FormFactorMethod,
     oracle: Oracle,
+    old_oracle: Option<Oracle>,
     params: &LinkParams,
     old: &Links,
     moved_root: &[bool],
@@ -348,8 +354,12 @@ pub fn update(
                         values[k] = Some(old.ff[o]);
                     }
                     if !need[k] {
+                        let resampled = old_oracle.is_some_and(|o| {
+                            samples_for(row_f[k] * o.bhat[s as usize], o.eps, params) != row_s[k]
+                        });
                         need[k] = moved_root[node.root as usize]
                             || values[k].is_none()
+                            || resampled
                             || shaft_hits_box(
                                 &[r.centroid, node.v[0], node.v[1], node.v[2]],
                                 lo,

@@ -107,6 +107,33 @@ pub struct Mesh {
     pub patch_depth: Vec<u8>,
     /// Number of patches.
     pub patch_count: usize,
+    /// Per input triangle: a hash of its surface's name and its index among that surface's
+    /// triangles (see [`Mesh::stable_id`]).
+    pub root_key: Vec<u64>,
+}
+
+/// See [`Mesh::root_key`].
+fn root_keys(scene: &Scene) -> Vec<u64> {
+    let mut seen = vec![0u64; scene.surfaces.len()];
+    scene
+        .triangles
+        .iter()
+        .map(|t| {
+            let name = scene
+                .surfaces
+                .get(t.surface as usize)
+                .map_or("", |s| s.name.as_str());
+            // FNV-1a of the name, then the triangle's index within its surface.
+            let h = name.bytes().fold(0xCBF2_9CE4_8422_2325u64, |h, b| {
+                (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01B3)
+            });
+            let k = seen.get_mut(t.surface as usize).map_or(0, |c| {
+                *c += 1;
+                *c - 1
+            });
+            crate::rng::hash(h, k, 2)
+        })
+        .collect()
 }
 
 impl Mesh {
@@ -152,6 +179,7 @@ impl Mesh {
             roots: Vec::with_capacity(plan.len()),
             leaves: Vec::with_capacity(total),
             root_surface: scene.triangles.iter().map(|t| t.surface).collect(),
+            root_key: root_keys(scene),
             patch_depth: plan.iter().map(|p| p.1).collect(),
             patch_count: plan.iter().map(|p| 1usize << (2 * p.1 as usize)).sum(),
         };
@@ -202,6 +230,20 @@ impl Mesh {
         let n = &mut self.nodes[id as usize];
         n.leaf_lo = lo;
         n.leaf_hi = self.leaves.len() as u32;
+    }
+
+    /// A number for `node` that depends on its surface's name, its input triangle's place among
+    /// that surface's triangles and its place in the triangle's subtree, not on the order of the
+    /// scene's surfaces nor on where the scene sits: random sequences seeded by it (visibility
+    /// rays) stay the same when other surfaces are added or removed, or the scene is scaled or
+    /// moved, so an edited bake keeps exactly the estimates a fresh bake would make.
+    pub fn stable_id(&self, node: u32) -> u64 {
+        let Some(n) = self.nodes.get(node as usize) else {
+            return u64::from(node);
+        };
+        let root_id = self.roots.get(n.root as usize).copied().unwrap_or(0);
+        let key = self.root_key.get(n.root as usize).copied().unwrap_or(0);
+        crate::rng::hash(key, u64::from(node.wrapping_sub(root_id)), 1)
     }
 
     /// Number of elements (leaves).

@@ -197,7 +197,11 @@ impl FormFactorMethod for AnalyticMethod {
     fn compute(&self, ctx: &FfContext, row: &Row, out: &mut [f32]) {
         let r = ctx.mesh.leaf_node(row.leaf);
         for (k, &s) in row.sources.iter().enumerate() {
-            let mut rng = Rng::new(hash(ctx.params.seed, u64::from(row.leaf), u64::from(s)));
+            let mut rng = Rng::new(hash(
+                ctx.params.seed,
+                ctx.mesh.stable_id(ctx.mesh.leaves[row.leaf as usize]),
+                ctx.mesh.stable_id(s),
+            ));
             let v = visible_fraction(
                 ctx,
                 r.centroid,
@@ -238,8 +242,8 @@ impl FormFactorMethod for RayCastMethod {
             let da = node.area / f64::from(n);
             let mut rng = Rng::new(hash(
                 ctx.params.seed ^ 0x5A5A,
-                u64::from(row.leaf),
-                u64::from(s),
+                ctx.mesh.stable_id(ctx.mesh.leaves[row.leaf as usize]),
+                ctx.mesh.stable_id(s),
             ));
             let mut f = 0.0;
             for i in 0..n {
@@ -275,7 +279,11 @@ impl FormFactorMethod for MonteCarloMethod {
         let r = ctx.mesh.leaf_node(row.leaf);
         let (t, b) = basis(r.normal);
         let n = ctx.params.monte_carlo_rays.max(1);
-        let mut rng = Rng::new(hash(ctx.params.seed ^ 0xC0FFEE, u64::from(row.leaf), 0));
+        let mut rng = Rng::new(hash(
+            ctx.params.seed ^ 0xC0FFEE,
+            ctx.mesh.stable_id(ctx.mesh.leaves[row.leaf as usize]),
+            0,
+        ));
         let mut counts = vec![0u32; row.sources.len()];
         for i in 0..n {
             let (u1, u2) = stratified(i, n, &mut rng);
