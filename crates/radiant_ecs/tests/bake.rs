@@ -382,7 +382,8 @@ fn removing_and_adding_static_entities_edits_the_bake_without_a_rebuild() {
         .collect();
     assert_eq!(block.len(), 5);
     // Out of the bake (no longer static), back in, then gone for good.
-    let steps: [(&str, Box<dyn Fn(&mut World)>); 3] = [
+    type Step<'a> = (&'a str, Box<dyn Fn(&mut World) + 'a>);
+    let steps: [Step; 3] = [
         (
             "remove Static",
             Box::new(|w: &mut World| {

@@ -171,7 +171,6 @@ fn assemble(n: usize, chunks: Vec<(Vec<u32>, Vec<u32>, Vec<f32>)>) -> Links {
     links
 }
 
-#[allow(clippy::too_many_arguments)]
 /// Visibility samples of a link that carries `transport`: one per `eps`, at most
 /// `params.max_samples`.
 fn samples_for(transport: f64, eps: f64, params: &LinkParams) -> u8 {
@@ -183,6 +182,10 @@ fn samples_for(transport: f64, eps: f64, params: &LinkParams) -> u8 {
     }
 }
 
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the row being refined and its scratch"
+)]
 fn refine(
     mesh: &Mesh,
     leaf: u32,
