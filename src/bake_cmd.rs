@@ -194,14 +194,12 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     // The builtin Cornell box also has path-traced radiosity at 24 surface points (RGB and
     // spectral Mitsuba 3 runs): pointwise errors, not just surface means.
     let cornell = args.scene.builtin.as_deref() == Some("cornell-box");
+    // Informational: a failure is a warning, not a failed bake.
     let rgb_points = if cornell {
-        let refs = metrics::parse_point_csv(CORNELL_POINTS_RGB, 1e-3)?;
-        Some(metrics::compare_points(
-            &result.mesh,
-            &result.radiosity,
-            &refs,
-            None,
-        )?)
+        metrics::parse_point_csv(CORNELL_POINTS_RGB, 1e-3)
+            .and_then(|refs| metrics::compare_points(&result.mesh, &result.radiosity, &refs, None))
+            .map_err(|e| println!("warning: no point comparison: {e}"))
+            .ok()
     } else {
         None
     };

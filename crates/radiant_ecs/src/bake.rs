@@ -11,7 +11,8 @@
 //! timing or thread count. The frame never waits for it. Edits are sent to the worker, which
 //! keeps the links and warm-starts: materials (`Bake::edit_surfaces`), lights
 //! (`Bake::edit_lights`) and moved, added or removed static geometry (`Bake::edit_geometry`, which
-//! recomputes only the links the move touches); adding or removing static surfaces bakes again.
+//! recomputes only the links the change touches); only a change of the static scene's bounding
+//! box bakes again.
 //! A bake that converged, or was paused, returns to the world, ready for the next edit or for
 //! resuming; an edit that reaches a worker as it stops is applied on the next start.
 
@@ -98,12 +99,12 @@ pub struct BakeStatus {
     pub iterations: u64,
     /// Sweeps (or shots) since the last material edit: the rebake's work.
     pub iterations_since_edit: u64,
-    /// Bakes built from scratch (the first one, added or removed static surfaces, moves that are
-    /// not rigid).
+    /// Bakes built from scratch (the first one, a change of the static scene's bounding box, a
+    /// rebake).
     pub builds: u64,
-    /// Edits applied by warm start (materials, lights, rigid moves).
+    /// Edits applied by warm start (materials, lights, static geometry moved, added or removed).
     pub edits: u64,
-    /// Rigid moves of static geometry among them, and the links they recomputed in total.
+    /// Static geometry edits among them (moves, additions, removals).
     pub geometry_edits: u64,
     /// Links recomputed by geometry edits (the rest were kept).
     pub links_recomputed: usize,
@@ -287,8 +288,8 @@ enum Start {
     Continue(Box<Bake>, Option<Edit>),
 }
 
-/// A change the bake absorbs without starting over: new materials, new lights, and rigid moves
-/// of static geometry (the scene to move to).
+/// A change the bake absorbs without starting over: new materials, new lights, and static
+/// geometry moved, added or removed (the scene to change to).
 struct Edit {
     surfaces: Vec<Surface>,
     lights: Option<Vec<Light>>,
@@ -300,14 +301,8 @@ fn apply(
     edit: &Edit,
     tx: &mpsc::Sender<Report>,
 ) -> Result<(), radiant_radiosity::BakeError> {
-    let added_or_removed = edit.surfaces.len() != bake.surfaces.len();
-    if added_or_removed && edit.geometry.is_none() {
-        return Err(radiant_radiosity::BakeError::NeedsRebuild);
-    }
-    if !added_or_removed {
-        bake.edit_surfaces(&edit.surfaces)?;
-    }
-    // Added or removed surfaces: the geometry edit brings their materials along.
+    // A geometry edit brings the scene's materials and lights along (and matches surfaces by
+    // name, so they must not be renamed under it first).
     if let Some(scene) = &edit.geometry {
         // Lights come with the scene.
         let stats = bake.edit_geometry(scene)?;
@@ -317,8 +312,14 @@ fn apply(
             contraction: bake.system.contraction(),
             recomputed: stats.recomputed,
         });
-    } else if let Some(l) = &edit.lights {
-        bake.edit_lights(l)?;
+    } else {
+        if edit.surfaces.len() != bake.surfaces.len() {
+            return Err(radiant_radiosity::BakeError::NeedsRebuild);
+        }
+        bake.edit_surfaces(&edit.surfaces)?;
+        if let Some(l) = &edit.lights {
+            bake.edit_lights(l)?;
+        }
     }
     Ok(())
 }

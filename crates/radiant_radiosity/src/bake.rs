@@ -564,21 +564,23 @@ impl Bake {
         result
     }
 
-    /// Moves, adds or removes static geometry and keeps what the edit does not touch: the form
-    /// factors of links whose receiver and source were not moved, added or removed and whose
-    /// shaft misses the changed geometry's old and new bounds (see [`links::update`]).
+    /// Moves, adds or removes static geometry (and takes the scene's materials and lights along)
+    /// and keeps what the edit does not touch: the form factors of links whose receiver and
+    /// source are on triangles that stayed where they were, and whose shaft misses the bounds of
+    /// the triangles that moved, came or went (see [`links::update`]).
     ///
-    /// - A rigid move keeps the triangles, surfaces and subdivision; vertices move.
-    /// - Added or removed surfaces (or triangles): triangles are matched to the old ones by
-    ///   surface name and exact position; matched ones keep their elements' links and
-    ///   radiosity, new ones get theirs computed, and the refinement oracle is recomputed as a
-    ///   fresh bake would (links whose visibility sample count changes with it are computed
-    ///   again). Visibility rays are seeded by each node's own triangle
-    ///   ([`Mesh::stable_id`]), so the links equal a fresh bake's bit for bit.
+    /// Triangles are matched to the old ones by surface name, their index within the surface
+    /// and exact position; a moved triangle is one that went and one that came. Matched ones
+    /// keep their elements' links and radiosity, the others get theirs computed, and the
+    /// refinement oracle is recomputed as a fresh bake would (links whose visibility sample
+    /// count changes with it are computed again). Visibility rays are seeded by each node's own
+    /// triangle ([`Mesh::stable_id`]), so the links equal a fresh bake's bit for bit (after a
+    /// resume from a checkpoint written under other materials or lights, a few links may keep
+    /// the sample counts of the oracle they were built with).
     ///
     /// Direct light and enclosed elements are computed again, and the solve warm-starts from
     /// the current solution. Returns [`BakeError::NeedsRebuild`] when the scene's bounding box
-    /// changed (every local coordinate would) or nothing emits any more.
+    /// changed (every local coordinate would), or when nothing emits before or after.
     pub fn edit_geometry(&mut self, scene: &Scene) -> Result<links::UpdateStats, BakeError> {
         let static_part;
         let scene = if scene.surfaces.iter().any(|s| s.dynamic) {
@@ -592,104 +594,17 @@ impl Bake {
             return Err(BakeError::NeedsRebuild);
         }
         let mesh = Mesh::new(scene, &self.params.mesh)?;
-        if scene.surfaces.len() != self.surfaces.len()
-            || scene.triangles.len() != self.mesh.roots.len()
+        if self.params.solver == SolverKind::Direct
+            && mesh.element_count() > self.params.solver_params.max_direct
         {
-            return self.edit_structure(scene, mesh);
-        }
-        let same_shape = mesh.frame.center == self.mesh.frame.center
-            && mesh.frame.scale == self.mesh.frame.scale
-            && mesh.nodes.len() == self.mesh.nodes.len()
-            && mesh.roots == self.mesh.roots
-            && mesh.root_surface == self.mesh.root_surface
-            && mesh.nodes.iter().zip(&self.mesh.nodes).all(|(a, b)| {
-                (a.first_child, a.leaf_lo, a.leaf_hi, a.root, a.depth)
-                    == (b.first_child, b.leaf_lo, b.leaf_hi, b.root, b.depth)
+            return Err(BakeError::TooLargeForDirect {
+                elements: mesh.element_count(),
+                limit: self.params.solver_params.max_direct,
             });
-        if !same_shape {
-            return self.edit_structure(scene, mesh);
         }
-        let moved: Vec<bool> = mesh
-            .roots
-            .iter()
-            .zip(&self.mesh.roots)
-            .map(|(&a, &b)| mesh.nodes[a as usize].v != self.mesh.nodes[b as usize].v)
-            .collect();
-        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-        for (r, _) in moved.iter().enumerate().filter(|(_, m)| **m) {
-            for m in [&mesh, &self.mesh] {
-                for v in m.nodes[m.roots[r] as usize].v {
-                    lo = lo.min(v);
-                    hi = hi.max(v);
-                }
-            }
-        }
-        let lights_changed = scene.lights != self.lights;
-        if !moved.iter().any(|&m| m) && !lights_changed {
-            return Ok(links::UpdateStats::default());
-        }
-        // The solution so far, read before the system changes under the solver.
-        let b = self.radiosity();
-        let bvh = Bvh::new(&mesh.root_triangles_f32());
-        let n = mesh.element_count();
-        self.direct = (!scene.lights.is_empty())
-            .then(|| lights::direct_irradiance(&mesh, &scene.lights, &bvh));
-        let mut source = Vec::with_capacity(n);
-        for (i, &id) in mesh.leaves.iter().enumerate() {
-            let root = mesh.nodes[id as usize].root as usize;
-            let s = &self.surfaces[mesh.root_surface[root] as usize];
-            let mut e = s.emission;
-            if let Some(d) = &self.direct {
-                for c in 0..3 {
-                    e[c] += s.reflectance[c] * d[i][c] / std::f64::consts::PI;
-                }
-            }
-            source.push(e);
-        }
-        let stats = if moved.iter().any(|&m| m) {
-            let ctx = FfContext {
-                mesh: &mesh,
-                vis: &bvh,
-                params: self.params.ff,
-            };
-            let method = form_factors::method(self.params.form_factors);
-            let (new_links, stats) = links::update(
-                &ctx,
-                method,
-                Oracle {
-                    bhat: &self.bhat,
-                    eps: self.eps,
-                },
-                None,
-                &self.params.links,
-                &self.system.links,
-                &moved,
-                (lo, hi),
-            );
-            self.dead = enclosed_elements(&mesh, &bvh, self.params.ff.seed);
-            self.system = System::new(
-                &mesh,
-                self.system.rho.clone(),
-                source,
-                new_links,
-                &self.dead,
-            );
-            stats
-        } else {
-            let rho = self.system.rho.clone();
-            self.system.set_materials(rho, source);
-            links::UpdateStats::default()
-        };
-        self.mesh = mesh;
-        self.lights = scene.lights.clone();
-        self.fingerprint = crate::checkpoint::fingerprint(scene, &self.params);
-        self.solver = new_solver(self.params.solver, &self.system, self.params.solver_params);
-        self.solver.warm_start(&self.system, &b);
-        self.last = None;
-        Ok(stats)
+        self.edit_structure(scene, mesh)
     }
 
-    /// Added or removed triangles (see [`Bake::edit_geometry`]).
     fn edit_structure(
         &mut self,
         scene: &Scene,
@@ -699,21 +614,18 @@ impl Bake {
             return Err(BakeError::NeedsRebuild);
         }
         let old = &self.mesh;
-        // Old roots by (surface name, exact local vertices).
-        let key = |m: &Mesh, surfaces: &[Surface], r: usize| {
+        // Old roots by (surface name and index within it, as hashed into the ray seeds; exact
+        // local vertices). The names come from each mesh, not from `self.surfaces`.
+        let key = |m: &Mesh, r: usize| {
             let v = m.nodes[m.roots[r] as usize].v;
-            let name = surfaces
-                .get(m.root_surface[r] as usize)
-                .map_or("", |s| s.name.as_str())
-                .to_string();
             (
-                name,
+                m.root_key.get(r).copied().unwrap_or(0),
                 v.map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]),
             )
         };
-        let mut by_key = std::collections::HashMap::new();
+        let mut by_key: std::collections::HashMap<_, Vec<usize>> = std::collections::HashMap::new();
         for r in 0..old.roots.len() {
-            by_key.entry(key(old, &self.surfaces, r)).or_insert(r);
+            by_key.entry(key(old, r)).or_default().push(r);
         }
         // The node range of each root: roots are pushed in order, each with its whole subtree.
         let range = |m: &Mesh, r: usize| {
@@ -726,11 +638,14 @@ impl Bake {
         let mut old_of_new_leaf = vec![u32::MAX; mesh.element_count()];
         let mut added = vec![true; mesh.roots.len()];
         for r in 0..mesh.roots.len() {
-            let Some(&o) = by_key.get(&key(&mesh, &scene.surfaces, r)) else {
+            let Some(o) = by_key
+                .get(&key(&mesh, r))
+                .and_then(|c| c.iter().copied().find(|&o| !matched_old[o]))
+            else {
                 continue;
             };
             let ((nlo, nhi), (olo, ohi)) = (range(&mesh, r), range(old, o));
-            if matched_old[o] || nhi - nlo != ohi - olo {
+            if nhi - nlo != ohi - olo {
                 continue;
             }
             matched_old[o] = true;
@@ -746,6 +661,10 @@ impl Bake {
             for k in 0..count {
                 old_of_new_leaf[nl + k] = (ol + k) as u32;
             }
+        }
+        let unchanged = !added.iter().any(|&a| a) && matched_old.iter().all(|&m| m);
+        if unchanged && scene.lights == self.lights && scene.surfaces == self.surfaces {
+            return Ok(links::UpdateStats::default());
         }
         // What changed occludes differently: the bounds of added and removed triangles.
         let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
@@ -809,6 +728,10 @@ impl Bake {
             rho.push(s.reflectance);
             source.push(e);
         }
+        if !source.iter().flatten().any(|&v| v > 0.0) {
+            // Lights that reach nothing: a fresh bake would say so and build no links.
+            return Err(BakeError::NeedsRebuild);
+        }
         // The oracle a fresh bake of this scene would use, so the links match a fresh bake's.
         let (bhat, amb) = estimates(&mesh, &rho, &source);
         let eps = (self.params.links.refinement * amb).max(f64::MIN_POSITIVE);
@@ -848,6 +771,8 @@ impl Bake {
         self.mesh = mesh;
         self.surfaces = scene.surfaces.clone();
         self.lights = scene.lights.clone();
+        self.warnings = scene.warnings();
+        self.resumed = false;
         self.fingerprint = crate::checkpoint::fingerprint(scene, &self.params);
         self.solver = new_solver(self.params.solver, &self.system, self.params.solver_params);
         self.solver.warm_start(&self.system, &b);

@@ -309,9 +309,12 @@ pub fn update(
         method.kind(),
         FormFactorKind::Analytic | FormFactorKind::RayCast
     );
+    // Padded past the f32 rounding of the visibility rays; an empty box (nothing moved)
+    // meets no shaft.
+    let any_box = moved_box.0.cmple(moved_box.1).all();
     let (lo, hi) = (
-        moved_box.0 - DVec3::splat(1e-9),
-        moved_box.1 + DVec3::splat(1e-9),
+        moved_box.0 - DVec3::splat(1e-6),
+        moved_box.1 + DVec3::splat(1e-6),
     );
     const CHUNK: usize = 64;
     type Chunk = (Vec<u32>, Vec<u32>, Vec<f32>, UpdateStats);
@@ -363,11 +366,12 @@ pub fn update(
                         need[k] = moved_root[node.root as usize]
                             || values[k].is_none()
                             || resampled
-                            || shaft_hits_box(
-                                &[r.centroid, node.v[0], node.v[1], node.v[2]],
-                                lo,
-                                hi,
-                            );
+                            || (any_box
+                                && shaft_hits_box(
+                                    &[r.centroid, node.v[0], node.v[1], node.v[2]],
+                                    lo,
+                                    hi,
+                                ));
                     }
                 }
                 if !per_link && need.iter().any(|&x| x) {

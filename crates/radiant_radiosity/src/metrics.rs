@@ -349,7 +349,7 @@ pub fn compare_points(
                 radiant_color::luminance(at(r)?),
                 radiant_color::luminance(r.radiosity),
             );
-            if !(theirs > 0.0 && ours.is_finite()) {
+            if !(theirs > 0.0 && ours > 0.0 && ours.is_finite()) {
                 return Err(BakeError::Reference(format!(
                     "point '{name}' has no luminance to normalise by"
                 )));
@@ -371,10 +371,13 @@ pub fn compare_points(
             name: r.name.clone(),
             ours,
             reference,
-            rel: if sum > 0.0 { diff / sum } else { diff },
+            rel: if sum > 0.0 { diff / sum } else { f64::INFINITY },
         });
     }
-    let n = points.len().max(1) as f64;
+    if points.is_empty() {
+        return Err(BakeError::Reference("no points to compare".into()));
+    }
+    let n = points.len() as f64;
     Ok(PointComparison {
         mean_rel: points.iter().map(|p| p.rel).sum::<f64>() / n,
         max_rel: points.iter().map(|p| p.rel).fold(0.0, f64::max),
