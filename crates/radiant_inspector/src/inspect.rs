@@ -185,22 +185,9 @@ impl Inspect for GaussianBlur {
 
 impl Inspect for DebugView {
     fn inspect(&mut self, ui: &mut Ui) -> bool {
-        combo(ui, "debug view", self, &DEBUG_VIEWS, debug_view_name)
+        combo(ui, "debug view", self, &DebugView::ALL, debug_view_name)
     }
 }
-
-/// Every debug view, in menu order.
-pub const DEBUG_VIEWS: [DebugView; 9] = [
-    DebugView::Lit,
-    DebugView::Albedo,
-    DebugView::Normal,
-    DebugView::Material,
-    DebugView::LightMap,
-    DebugView::Emissive,
-    DebugView::Depth,
-    DebugView::AmbientOcclusion,
-    DebugView::DirectLight,
-];
 
 /// The menu name of a debug view.
 pub fn debug_view_name(v: DebugView) -> &'static str {

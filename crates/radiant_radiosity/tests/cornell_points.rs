@@ -8,51 +8,11 @@
 
 mod common;
 
-use std::collections::HashMap;
-
-use radiant_color::cie::Spectrum;
 use radiant_radiosity::BakeParams;
 use radiant_radiosity::metrics::{
     CORNELL_POINTS_RGB, CORNELL_POINTS_SPECTRAL, compare_points, element_at, parse_point_csv,
 };
-use radiant_radiosity::spectral::{SpectralMaterial, solve_spectral};
-
-fn spectra() -> HashMap<String, SpectralMaterial> {
-    let text = include_str!("../../radiant_color/tests/data/cornell_spectra_reflectance.csv");
-    let table = |name: &str| -> Spectrum {
-        let mut lines = text.lines();
-        let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-        let col = header.iter().position(|h| *h == name).expect("column");
-        let (mut w, mut v) = (Vec::new(), Vec::new());
-        for l in lines {
-            let f: Vec<f64> = l.split(',').map(|x| x.parse().expect("number")).collect();
-            w.push(f[0]);
-            v.push(f[col]);
-        }
-        Spectrum::new(w, v).expect("spectrum")
-    };
-    let mut m = HashMap::new();
-    for name in ["white", "red", "green"] {
-        m.insert(
-            name.to_string(),
-            SpectralMaterial {
-                reflectance: table(name),
-                emission: None,
-            },
-        );
-    }
-    m.insert(
-        "light".into(),
-        SpectralMaterial {
-            reflectance: Spectrum::constant(0.78),
-            emission: Some(
-                Spectrum::new(vec![400.0, 500.0, 600.0, 700.0], vec![0.0, 8.0, 15.6, 18.4])
-                    .expect("spd"),
-            ),
-        },
-    );
-    m
-}
+use radiant_radiosity::spectral::solve_spectral;
 
 #[test]
 fn cornell_box_matches_path_traced_points_in_rgb_and_spectral() {
@@ -69,8 +29,15 @@ fn cornell_box_matches_path_traced_points_in_rgb_and_spectral() {
         );
     }
     let rgb = compare_points(&r.mesh, &r.radiosity, &rgb_refs, None).expect("compare");
-    let sp = solve_spectral(&r.system, &r.mesh, &scene.surfaces, &spectra(), 32, 1e-6)
-        .expect("spectral");
+    let sp = solve_spectral(
+        &r.system,
+        &r.mesh,
+        &scene.surfaces,
+        &common::cornell_spectra(),
+        32,
+        1e-6,
+    )
+    .expect("spectral");
     let spec_refs = parse_point_csv(CORNELL_POINTS_SPECTRAL, 1e-3).expect("spectral points");
     let spectral =
         compare_points(&r.mesh, &sp.radiosity, &spec_refs, Some("light_centre")).expect("compare");

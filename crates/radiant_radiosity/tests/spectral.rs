@@ -60,38 +60,7 @@ fn measured_cornell_spectra_bake() {
     let mut p = BakeParams::default();
     p.mesh.patch_size = 0.3;
     let r = common::bake(&scene, &p);
-    let table = |name: &str| -> Spectrum {
-        let text = include_str!("../../radiant_color/tests/data/cornell_spectra_reflectance.csv");
-        let mut lines = text.lines();
-        let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-        let col = header.iter().position(|h| *h == name).expect("column");
-        let (mut w, mut v) = (Vec::new(), Vec::new());
-        for l in lines {
-            let f: Vec<f64> = l.split(',').map(|x| x.parse().expect("number")).collect();
-            w.push(f[0]);
-            v.push(f[col]);
-        }
-        Spectrum::new(w, v).expect("spectrum")
-    };
-    let mut materials = HashMap::new();
-    for name in ["white", "red", "green"] {
-        materials.insert(
-            name.to_string(),
-            SpectralMaterial {
-                reflectance: table(name),
-                emission: None,
-            },
-        );
-    }
-    let light =
-        Spectrum::new(vec![400.0, 500.0, 600.0, 700.0], vec![0.0, 8.0, 15.6, 18.4]).expect("spd");
-    materials.insert(
-        "light".into(),
-        SpectralMaterial {
-            reflectance: Spectrum::constant(0.78),
-            emission: Some(light),
-        },
-    );
+    let mut materials = common::cornell_spectra();
     let sp = solve_spectral(&r.system, &r.mesh, &scene.surfaces, &materials, 16, 1e-6)
         .expect("spectral");
     assert!(sp.xyz.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));

@@ -68,3 +68,46 @@ pub fn rect_z(a: f64, b: f64, z0: f64, up: bool) -> Vec<[DVec3; 3]> {
     };
     q.to_vec()
 }
+
+/// The Cornell box's measured spectra (Cornell PCG data, as exported in radiant_color's test
+/// data): white, red and green reflectances and the light's relative emission, reflectance
+/// 0.78 (bitterli's).
+pub fn cornell_spectra()
+-> std::collections::HashMap<String, radiant_radiosity::spectral::SpectralMaterial> {
+    use radiant_color::cie::Spectrum;
+    use radiant_radiosity::spectral::SpectralMaterial;
+    let text = include_str!("../../../radiant_color/tests/data/cornell_spectra_reflectance.csv");
+    let table = |name: &str| -> Spectrum {
+        let mut lines = text.lines();
+        let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+        let col = header.iter().position(|h| *h == name).expect("column");
+        let (mut w, mut v) = (Vec::new(), Vec::new());
+        for l in lines {
+            let f: Vec<f64> = l.split(',').map(|x| x.parse().expect("number")).collect();
+            w.push(f[0]);
+            v.push(f[col]);
+        }
+        Spectrum::new(w, v).expect("spectrum")
+    };
+    let mut m = std::collections::HashMap::new();
+    for name in ["white", "red", "green"] {
+        m.insert(
+            name.to_string(),
+            SpectralMaterial {
+                reflectance: table(name),
+                emission: None,
+            },
+        );
+    }
+    m.insert(
+        "light".into(),
+        SpectralMaterial {
+            reflectance: Spectrum::constant(0.78),
+            emission: Some(
+                Spectrum::new(vec![400.0, 500.0, 600.0, 700.0], vec![0.0, 8.0, 15.6, 18.4])
+                    .expect("spd"),
+            ),
+        },
+    );
+    m
+}
