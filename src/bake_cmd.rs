@@ -149,17 +149,7 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     }
     ensure_dir(&args.out)?;
 
-    let pb = progress_bar(1, "form factors");
-    let bake = crate::start_bake(
-        &scene,
-        &params,
-        args.checkpoint.as_deref(),
-        &|done, total| {
-            pb.set_length(total as u64);
-            pb.set_position(done as u64);
-        },
-    )?;
-    pb.set_message("solving");
+    let (bake, pb) = crate::start_bake(&scene, &params, args.checkpoint.as_deref())?;
     pb.set_length(1000);
     pb.set_position(0);
     let tol = params.solver_params.tolerance;

@@ -214,25 +214,35 @@ impl SolveArgs {
     }
 }
 
-/// Starts a bake, resuming from `checkpoint` when it exists and fits the scene.
+/// Starts a bake, resuming from `checkpoint` when it exists and fits the scene, with a
+/// progress bar over the form factors; the bar is returned, set to "solving", for the solve.
 pub(crate) fn start_bake(
     scene: &radiant::scene::Scene,
     params: &BakeParams,
     checkpoint: Option<&std::path::Path>,
-    progress: &(dyn Fn(usize, usize) + Sync),
-) -> anyhow::Result<radiant::radiosity::Bake> {
-    if let Some(path) = checkpoint.filter(|p| p.exists()) {
+) -> anyhow::Result<(radiant::radiosity::Bake, indicatif::ProgressBar)> {
+    let pb = bake_cmd::progress_bar(1, "form factors");
+    let resumed = checkpoint.filter(|p| p.exists()).and_then(|path| {
         match radiant::radiosity::Bake::resume(scene, params, path) {
             Ok(b) => {
                 println!("resumed from {} (no form factors computed)", path.display());
-                return Ok(b);
+                Some(b)
             }
-            Err(e) => println!("not resuming: {e}; baking from scratch"),
+            Err(e) => {
+                println!("not resuming: {e}; baking from scratch");
+                None
+            }
         }
-    }
-    Ok(radiant::radiosity::Bake::with_progress(
-        scene, params, progress,
-    )?)
+    });
+    let bake = match resumed {
+        Some(b) => b,
+        None => radiant::radiosity::Bake::with_progress(scene, params, &|done, total| {
+            pb.set_length(total as u64);
+            pb.set_position(done as u64);
+        })?,
+    };
+    pb.set_message("solving");
+    Ok((bake, pb))
 }
 
 /// Seconds as a `Duration`, with a clear error instead of a panic for absurd values.

@@ -14,8 +14,6 @@ use radiant::render::capture::{write_exr, write_png};
 use radiant::render::lighting::DebugView;
 use serde_json::json;
 
-use crate::bake_cmd::progress_bar;
-
 /// Mitsuba 3 path-traced radiance of the builtin Cornell box from its camera, 128×128, 16 384
 /// spp (tools/make_cornell_render_reference.py).
 const CORNELL_RENDER_REFERENCE: &[u8] =
@@ -139,17 +137,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
 
     // No emitters: nothing to bake, and nothing is allocated for it.
     let bake = if scene.has_emitters() {
-        let pb = progress_bar(1, "form factors");
-        let bake = crate::start_bake(
-            &scene,
-            &params,
-            args.checkpoint.as_deref(),
-            &|done, total| {
-                pb.set_length(total as u64);
-                pb.set_position(done as u64);
-            },
-        )?;
-        pb.set_message("solving");
+        let (bake, pb) = crate::start_bake(&scene, &params, args.checkpoint.as_deref())?;
         let result = bake.run_to_end(&mut |BakeEvent::Solve(p, _)| {
             pb.set_message(format!("solving, residual {:.1e}", p.residual));
         })?;

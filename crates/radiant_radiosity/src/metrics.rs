@@ -128,20 +128,30 @@ pub fn compare_elements(area: &[f64], got: &[Rgb], reference: &[Rgb]) -> ErrorSt
     )
 }
 
-/// Parses a per-surface reference CSV into (surface, radiosity in emissive units). Two layouts:
-/// - ours (`surfaces.csv`): `surface,area,b_r,b_g,b_b`;
-/// - Mitsuba irradiance meters (`quad,...,B_r,B_g,B_b,...`): `B` is exitance, divided by π.
-pub fn parse_reference_csv(text: &str) -> Result<Vec<(String, Rgb)>, BakeError> {
+/// The header fields and the data lines of a CSV (blank lines and `#` comments skipped);
+/// `what` names the file in the error for an empty one.
+fn csv_lines<'a>(
+    text: &'a str,
+    what: &str,
+) -> Result<(Vec<&'a str>, impl Iterator<Item = &'a str>), BakeError> {
     let mut lines = text
         .lines()
         .map(str::trim)
         .filter(|l| !l.is_empty() && !l.starts_with('#'));
-    let header: Vec<&str> = lines
+    let header = lines
         .next()
-        .ok_or_else(|| BakeError::Reference("empty reference file".into()))?
+        .ok_or_else(|| BakeError::Reference(format!("empty {what}")))?
         .split(',')
         .map(str::trim)
         .collect();
+    Ok((header, lines))
+}
+
+/// Parses a per-surface reference CSV into (surface, radiosity in emissive units). Two layouts:
+/// - ours (`surfaces.csv`): `surface,area,b_r,b_g,b_b`;
+/// - Mitsuba irradiance meters (`quad,...,B_r,B_g,B_b,...`): `B` is exitance, divided by π.
+pub fn parse_reference_csv(text: &str) -> Result<Vec<(String, Rgb)>, BakeError> {
+    let (header, lines) = csv_lines(text, "reference file")?;
     let col = |name: &str| header.iter().position(|h| h.eq_ignore_ascii_case(name));
     let (cols, scale) = if let (Some(r), Some(g), Some(b)) = (col("b_r"), col("b_g"), col("b_b")) {
         // Mitsuba's columns are upper case B_r; ours lower case b_r: tell them apart by the
@@ -222,16 +232,7 @@ pub struct PointReference {
 /// Parses a `point,x_mm,y_mm,z_mm,nx,ny,nz,L_r,L_g,L_b,...` CSV; positions are multiplied by
 /// `mm_to_scene` (1e-3 for a scene in metres).
 pub fn parse_point_csv(text: &str, mm_to_scene: f64) -> Result<Vec<PointReference>, BakeError> {
-    let mut lines = text
-        .lines()
-        .map(str::trim)
-        .filter(|l| !l.is_empty() && !l.starts_with('#'));
-    let header: Vec<&str> = lines
-        .next()
-        .ok_or_else(|| BakeError::Reference("empty point reference".into()))?
-        .split(',')
-        .map(str::trim)
-        .collect();
+    let (header, lines) = csv_lines(text, "point reference")?;
     let want = [
         "x_mm", "y_mm", "z_mm", "nx", "ny", "nz", "L_r", "L_g", "L_b",
     ];

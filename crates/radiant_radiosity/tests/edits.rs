@@ -30,6 +30,21 @@ fn edited(scene: &Scene, brighter_light: bool) -> Scene {
 
 /// Steps until converged; returns the solver's iteration count (sweeps or shots, cumulative
 /// over the bake's life).
+/// The largest channel difference between `got` and `reference`, and `reference`'s peak.
+fn worst_and_peak(got: &[[f64; 3]], reference: &[[f64; 3]]) -> (f64, f64) {
+    let peak = reference
+        .iter()
+        .flatten()
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    let worst = got
+        .iter()
+        .flatten()
+        .zip(reference.iter().flatten())
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max);
+    (worst, peak)
+}
+
 fn solve(bake: &mut Bake) -> u64 {
     for _ in 0..100_000 {
         let p = bake
@@ -63,13 +78,7 @@ fn a_material_edit_warm_starts_to_the_cold_answer_with_less_work() {
         cold.edit_surfaces(&target.surfaces).expect("edit");
         let cold_work = solve(&mut cold);
         let (bw, bc) = (warm.radiosity(), cold.radiosity());
-        let peak = bc.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
-        let worst = bw
-            .iter()
-            .flatten()
-            .zip(bc.iter().flatten())
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
+        let (worst, peak) = worst_and_peak(&bw, &bc);
         assert!(
             worst <= 1e-4 * peak,
             "{solver:?}: warm and cold differ by {worst} (peak {peak})"
@@ -176,13 +185,7 @@ fn a_checkpoint_resumes_without_form_factors_and_refuses_other_scenes() {
     let p1 = resumed.step(std::time::Duration::ZERO).expect("step");
     assert!(p1.converged, "resumed bake not converged: {p1:?}");
     let (a, b) = (bake.radiosity(), resumed.radiosity());
-    let peak = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
-    let worst = a
-        .iter()
-        .flatten()
-        .zip(b.iter().flatten())
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max);
+    let (worst, peak) = worst_and_peak(&b, &a);
     assert!(worst <= 2e-6 * peak, "resumed differs by {worst}");
     eprintln!("resume took {resume_s:.3} s");
 
@@ -274,13 +277,7 @@ fn moving_a_block_keeps_untouched_form_factors_and_matches_a_fresh_bake() {
         assert_eq!(bake.system.links.src, fresh.system.links.src, "{ff:?}");
         assert_eq!(bake.system.links.ff, fresh.system.links.ff, "{ff:?}");
         let (a, b) = (bake.radiosity(), &fresh.radiosity);
-        let peak = b.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
-        let worst = a
-            .iter()
-            .flatten()
-            .zip(b.iter().flatten())
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0, f64::max);
+        let (worst, peak) = worst_and_peak(&a, b);
         assert!(worst <= 1e-4 * peak, "{ff:?}: differs by {worst}");
         let share = stats.recomputed as f64 / (stats.recomputed + stats.kept) as f64;
         assert!(share < 0.9, "{ff:?}: recomputed {share:.2} of the links");
@@ -361,13 +358,7 @@ fn removing_and_adding_a_block_keeps_untouched_form_factors_and_matches_a_fresh_
         assert!(lk.src == fk.src, "{what}: link sources differ");
         assert!(lk.ff == fk.ff, "{what}: form factors differ");
         let (a, b) = (bake.radiosity(), &fresh.radiosity);
-        let peak = b.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
-        let worst = a
-            .iter()
-            .flatten()
-            .zip(b.iter().flatten())
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0, f64::max);
+        let (worst, peak) = worst_and_peak(&a, b);
         assert!(
             worst <= 1e-4 * peak,
             "{what}: differs by {:.2e} of the peak",
