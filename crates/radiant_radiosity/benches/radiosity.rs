@@ -1,5 +1,6 @@
 //! Hot paths: the analytic kernel, form factors per method (a whole link build on the Cornell
-//! box), and one solver step of each iterative solver.
+//! box), one solver step of each iterative solver, and a geometry edit (the short block moved
+//! 5 cm and back) on the default Cornell bake.
 use std::hint::black_box;
 use std::time::Duration;
 
@@ -93,12 +94,47 @@ fn solvers(c: &mut Criterion) {
     g.finish();
 }
 
+/// The builtin box with the short block moved by `dx` along x.
+fn moved_block(scene: &radiant_scene::Scene, dx: f64) -> radiant_scene::Scene {
+    let mut s = scene.clone();
+    for t in &mut s.triangles {
+        if s.surfaces[t.surface as usize]
+            .name
+            .starts_with("short_block")
+        {
+            for v in &mut t.vertices {
+                v.x += dx;
+            }
+        }
+    }
+    s
+}
+
+fn edits(c: &mut Criterion) {
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    let moved = moved_block(&scene, 0.05);
+    let mut bake = Bake::new(&scene, &BakeParams::default()).expect("bake");
+    let mut g = c.benchmark_group("cornell_default_edit");
+    g.sample_size(10).measurement_time(Duration::from_secs(8));
+    g.throughput(Throughput::Elements(bake.system.links.len() as u64));
+    let mut there = false;
+    g.bench_function("move_short_block_5cm", |b| {
+        b.iter(|| {
+            there = !there;
+            bake.edit_geometry(if there { &moved } else { &scene })
+                .expect("a rigid move")
+                .recomputed
+        })
+    });
+    g.finish();
+}
+
 #[allow(
     missing_docs,
     reason = "criterion_group! generates an undocumented function"
 )]
 mod group {
     use super::*;
-    criterion::criterion_group!(benches, kernel, form_factors, solvers);
+    criterion::criterion_group!(benches, kernel, form_factors, solvers, edits);
 }
 criterion::criterion_main!(group::benches);

@@ -136,6 +136,8 @@ pub struct BakeResult {
     pub report: BakeReport,
     fingerprint: u64,
     dead: Vec<bool>,
+    /// The refinement oracle the links were built with, when known.
+    oracle: Option<(Vec<f64>, f64)>,
 }
 
 impl BakeResult {
@@ -148,6 +150,7 @@ impl BakeResult {
             &self.system.links,
             &self.dead,
             &self.radiosity,
+            self.oracle.as_ref().map(|(b, e)| (b.as_slice(), *e)),
         )
     }
 }
@@ -176,6 +179,8 @@ pub struct Bake {
     /// The refinement oracle's estimate and threshold the links were built with.
     bhat: Vec<f64>,
     eps: f64,
+    /// Whether `bhat` and `eps` are really those (not after a resume from an old checkpoint).
+    oracle_known: bool,
     /// Lights of the scene (for geometry edits, which recompute direct light).
     lights: Vec<Light>,
     solver: Box<dyn Solver>,
@@ -256,6 +261,8 @@ impl Bake {
             &self.system.links,
             &self.dead,
             &self.radiosity(),
+            self.oracle_known
+                .then_some((self.bhat.as_slice(), self.eps)),
         )
     }
 
@@ -354,9 +361,9 @@ impl Bake {
 
         let mut warnings = scene.warnings();
         let has_emitters = source.iter().any(|s| s.iter().any(|&v| v > 0.0));
-        let (saved_links, saved_b) = match saved {
-            Some(sv) => (Some((sv.links, sv.dead)), Some(sv.radiosity)),
-            None => (None, None),
+        let (saved_links, saved_b, saved_oracle) = match saved {
+            Some(sv) => (Some((sv.links, sv.dead)), Some(sv.radiosity), sv.oracle),
+            None => (None, None, None),
         };
         if has_emitters
             && saved_links
@@ -396,8 +403,13 @@ impl Bake {
         if dead_count > 0 {
             tracing::debug!("{dead_count} elements lie inside closed geometry");
         }
-        let (bhat, amb) = estimates(&mesh, &rho, &source);
-        let eps = (params.links.refinement * amb).max(f64::MIN_POSITIVE);
+        // The oracle the links were built with: this scene's, or the one the checkpoint stored
+        // (its materials and lights may have differed).
+        let oracle_known = !resumed || saved_oracle.is_some();
+        let (bhat, eps) = match saved_oracle {
+            Some(o) => o,
+            None => estimates(&mesh, &rho, &source, params.links.refinement),
+        };
         let system = System::new(&mesh, rho, source, links, &dead);
         let mut solver = new_solver(params.solver, &system, params.solver_params);
         if let Some(b) = &saved_b {
@@ -417,6 +429,7 @@ impl Bake {
             resumed,
             bhat,
             eps,
+            oracle_known,
             lights: scene.lights.clone(),
             solver,
             started,
@@ -439,14 +452,13 @@ impl Bake {
     ) -> links::Links {
         let n = mesh.element_count();
         if has_emitters {
-            let (bhat, amb) = estimates(mesh, rho, source);
+            let (bhat, eps) = estimates(mesh, rho, source, params.links.refinement);
             let ctx = FfContext {
                 mesh,
                 vis: bvh,
                 params: params.ff,
             };
             let method = form_factors::method(params.form_factors);
-            let eps = (params.links.refinement * amb).max(f64::MIN_POSITIVE);
             links::build(
                 &ctx,
                 method,
@@ -666,47 +678,17 @@ impl Bake {
         if unchanged && scene.lights == self.lights && scene.surfaces == self.surfaces {
             return Ok(links::UpdateStats::default());
         }
-        // What changed occludes differently: the bounds of added and removed triangles.
-        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-        let mut grow = |v: [DVec3; 3]| {
-            for p in v {
-                lo = lo.min(p);
-                hi = hi.max(p);
-            }
-        };
+        // What changed occludes differently: the triangles that came and went.
+        let mut changed: Vec<[DVec3; 3]> = Vec::new();
         for (r, _) in added.iter().enumerate().filter(|(_, a)| **a) {
-            grow(mesh.nodes[mesh.roots[r] as usize].v);
+            changed.push(mesh.nodes[mesh.roots[r] as usize].v);
         }
         for (o, _) in matched_old.iter().enumerate().filter(|(_, m)| !**m) {
-            grow(old.nodes[old.roots[o] as usize].v);
+            changed.push(old.nodes[old.roots[o] as usize].v);
         }
-        // The old links in the new numbering, rows sorted by their sources' first leaf (as
-        // `links::update` merges them); links from removed geometry are dropped.
-        let n = mesh.element_count();
-        let mut row = Vec::with_capacity(n + 1);
-        let (mut src, mut ff) = (Vec::new(), Vec::new());
-        row.push(0);
-        let mut pairs: Vec<(u32, u32, f32)> = Vec::new();
-        for &o in &old_of_new_leaf {
-            if o != u32::MAX {
-                let o = o as usize;
-                pairs.clear();
-                for k in self.system.links.row[o]..self.system.links.row[o + 1] {
-                    let s = new_of_old_node[self.system.links.src[k] as usize];
-                    if s != u32::MAX {
-                        pairs.push((mesh.nodes[s as usize].leaf_lo, s, self.system.links.ff[k]));
-                    }
-                }
-                pairs.sort_by_key(|p| (p.0, p.1));
-                for &(_, s, f) in &pairs {
-                    src.push(s);
-                    ff.push(f);
-                }
-            }
-            row.push(src.len());
-        }
-        let translated = links::Links { row, src, ff };
+        let changed = links::ChangeSet::new(&changed);
         // The current solution, carried over to the elements that stay.
+        let n = mesh.element_count();
         let b_old = self.radiosity();
         let b: Vec<Rgb> = old_of_new_leaf
             .iter()
@@ -733,8 +715,7 @@ impl Bake {
             return Err(BakeError::NeedsRebuild);
         }
         // The oracle a fresh bake of this scene would use, so the links match a fresh bake's.
-        let (bhat, amb) = estimates(&mesh, &rho, &source);
-        let eps = (self.params.links.refinement * amb).max(f64::MIN_POSITIVE);
+        let (bhat, eps) = estimates(&mesh, &rho, &source, self.params.links.refinement);
         let ctx = FfContext {
             mesh: &mesh,
             vis: &bvh,
@@ -753,14 +734,18 @@ impl Bake {
             &ctx,
             method,
             Oracle { bhat: &bhat, eps },
-            Some(Oracle {
-                bhat: &old_bhat,
-                eps: self.eps,
-            }),
             &self.params.links,
-            &translated,
-            &added,
-            (lo, hi),
+            &self.system.links,
+            &links::Change {
+                old_of_new_leaf: &old_of_new_leaf,
+                new_of_old_node: &new_of_old_node,
+                moved_root: &added,
+                triangles: &changed,
+                old_oracle: self.oracle_known.then_some(Oracle {
+                    bhat: &old_bhat,
+                    eps: self.eps,
+                }),
+            },
         );
         let dead = enclosed_elements(&mesh, &bvh, self.params.ff.seed);
         self.system = System::new(&mesh, rho, source, new_links, &dead);
@@ -768,6 +753,7 @@ impl Bake {
         self.direct = direct;
         self.bhat = bhat;
         self.eps = eps;
+        self.oracle_known = true;
         self.mesh = mesh;
         self.surfaces = scene.surfaces.clone();
         self.lights = scene.lights.clone();
@@ -873,6 +859,7 @@ impl Bake {
             report,
             fingerprint: self.fingerprint,
             dead: self.dead,
+            oracle: self.oracle_known.then_some((self.bhat, self.eps)),
         }
     }
 }
@@ -916,8 +903,13 @@ fn enclosed_elements(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<bool> 
         .collect()
 }
 
-/// Per-node radiosity estimates `B̂` (max channel) for refinement, and the ambient level.
-fn estimates(mesh: &Mesh, rho: &[Rgb], source: &[Rgb]) -> (Vec<f64>, f64) {
+/// The refinement oracle: per-node radiosity estimates `B̂` (max channel) relative to the
+/// ambient level `B_amb`, and the threshold (`refinement`): a source is split while
+/// `F × B̂ > refinement × B_amb`. Relative, a surface that neither emits nor is lit directly
+/// has the estimate `ρ` whatever the ambient level, so an edit that changes the ambient level
+/// (moving a block changes the total area in the last bits) leaves those estimates, and every
+/// refinement decision made with them, exactly as they were.
+fn estimates(mesh: &Mesh, rho: &[Rgb], source: &[Rgb], refinement: f64) -> (Vec<f64>, f64) {
     let max3 = |v: &Rgb| v[0].max(v[1]).max(v[2]);
     let (mut area, mut s_sum, mut r_sum) = (0.0, 0.0, 0.0);
     for (i, &id) in mesh.leaves.iter().enumerate() {
@@ -927,18 +919,25 @@ fn estimates(mesh: &Mesh, rho: &[Rgb], source: &[Rgb]) -> (Vec<f64>, f64) {
         r_sum += a * max3(&rho[i]);
     }
     let rho_mean = (r_sum / area).min(0.99);
-    let amb = s_sum / area / (1.0 - rho_mean);
+    let amb = (s_sum / area / (1.0 - rho_mean)).max(f64::MIN_POSITIVE);
     let mut bhat = vec![0.0; mesh.nodes.len()];
     for n in (0..mesh.nodes.len()).rev() {
         let node = &mesh.nodes[n];
         bhat[n] = if node.is_leaf() {
             let i = node.leaf_lo as usize;
-            max3(&source[i]) + max3(&rho[i]) * amb
+            let s = max3(&source[i]);
+            // Zero stays exactly zero; a huge emitter over a tiny ambient stays finite.
+            let e = if s > 0.0 {
+                (s / amb).min(f64::MAX)
+            } else {
+                0.0
+            };
+            e + max3(&rho[i])
         } else {
             (0..4)
                 .map(|k| bhat[(node.first_child + k) as usize])
                 .fold(0.0, f64::max)
         };
     }
-    (bhat, amb)
+    (bhat, refinement)
 }

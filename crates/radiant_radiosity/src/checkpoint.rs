@@ -1,11 +1,15 @@
 //! Bake checkpoints: the links (form factors), the enclosed-element flags and the solution,
 //! written atomically, so a long bake resumes after a restart without recomputing form factors.
 //!
-//! Layout, little-endian: 16-byte magic and version; the fingerprint of the geometry, lights and
-//! every parameter the links depend on; element, node and link counts; row offsets (u64),
-//! sources (u32), form factors (f32), enclosed flags (u8), radiosity (3 × f64 per element);
-//! an FNV-1a checksum of all of it. Materials and lights are not in the fingerprint: a
-//! checkpoint of the same geometry with other colours or lights resumes as an edit would.
+//! Layout (version 2), little-endian: 16-byte magic and version; the fingerprint of the
+//! geometry, lights and every parameter the links depend on; element, node, link and fully
+//! occluded link counts, and flags (1: the occluded links are stored, 2: the refinement oracle
+//! is); row offsets (u64), sources (u32), form factors (f32), enclosed flags (u8), radiosity
+//! (3 × f64 per element); the occluded links' row offsets (u64) and sources (u32); the oracle's
+//! threshold and per-node estimates (f64); an FNV-1a checksum of all of it. Version 1 (no counts
+//! of occluded links, no flags, nothing after the radiosity) is still read: edits after such a
+//! resume walk every row again. Materials and lights are not in the fingerprint: a checkpoint of
+//! the same geometry with other colours or lights resumes as an edit would.
 
 use std::io::Write;
 use std::path::Path;
@@ -17,7 +21,9 @@ use crate::bake::BakeParams;
 use crate::links::Links;
 use crate::system::Rgb;
 
-const MAGIC: &[u8; 16] = b"RADIANT-BAKE\0\0\0\x01";
+/// The magic, without its last byte: the version.
+const MAGIC: &[u8; 15] = b"RADIANT-BAKE\0\0\0";
+const VERSION: u8 = 2;
 
 /// What a checkpoint restores.
 pub struct Saved {
@@ -31,6 +37,9 @@ pub struct Saved {
     pub dead: Vec<bool>,
     /// Radiosity per element.
     pub radiosity: Vec<Rgb>,
+    /// The refinement oracle the links were built with, when stored: per-node estimates and the
+    /// threshold.
+    pub oracle: Option<(Vec<f64>, f64)>,
 }
 
 /// FNV-1a, 64 bit.
@@ -83,12 +92,25 @@ pub fn write(
     links: &Links,
     dead: &[bool],
     radiosity: &[Rgb],
+    oracle: Option<(&[f64], f64)>,
 ) -> Result<(), BakeError> {
     let io = |e: std::io::Error| BakeError::Checkpoint(format!("{}: {e}", path.display()));
     let n = radiosity.len();
-    let mut buf: Vec<u8> = Vec::with_capacity(64 + links.bytes() + n * 25);
+    let hidden = links.hidden_known();
+    let oracle = oracle.filter(|(b, _)| b.len() == nodes);
+    let flags = u64::from(hidden) | (u64::from(oracle.is_some()) << 1);
+    let mut buf: Vec<u8> = Vec::with_capacity(80 + links.bytes() + n * 25 + nodes * 8);
     buf.extend_from_slice(MAGIC);
-    for v in [fingerprint, n as u64, nodes as u64, links.len() as u64] {
+    buf.push(VERSION);
+    let hidden_count = if hidden { links.hidden_src.len() } else { 0 };
+    for v in [
+        fingerprint,
+        n as u64,
+        nodes as u64,
+        links.len() as u64,
+        hidden_count as u64,
+        flags,
+    ] {
         buf.extend_from_slice(&v.to_le_bytes());
     }
     for &r in &links.row {
@@ -104,6 +126,20 @@ pub fn write(
     for b in radiosity {
         for c in b {
             buf.extend_from_slice(&c.to_le_bytes());
+        }
+    }
+    if hidden {
+        for &r in &links.hidden_row {
+            buf.extend_from_slice(&(r as u64).to_le_bytes());
+        }
+        for &s in &links.hidden_src {
+            buf.extend_from_slice(&s.to_le_bytes());
+        }
+    }
+    if let Some((bhat, eps)) = oracle {
+        buf.extend_from_slice(&eps.to_le_bytes());
+        for b in bhat {
+            buf.extend_from_slice(&b.to_le_bytes());
         }
     }
     let mut h = Fnv::new();
@@ -124,77 +160,197 @@ pub fn write(
     Ok(())
 }
 
+/// Reads little-endian values off a checked byte slice.
+struct Cursor<'a> {
+    data: &'a [u8],
+    at: usize,
+}
+
+impl Cursor<'_> {
+    fn take<const N: usize>(&mut self) -> [u8; N] {
+        let mut a = [0u8; N];
+        a.copy_from_slice(&self.data[self.at..self.at + N]);
+        self.at += N;
+        a
+    }
+    fn u64(&mut self) -> u64 {
+        u64::from_le_bytes(self.take())
+    }
+    fn u32(&mut self) -> u32 {
+        u32::from_le_bytes(self.take())
+    }
+    fn f32(&mut self) -> f32 {
+        f32::from_le_bytes(self.take())
+    }
+    fn f64(&mut self) -> f64 {
+        f64::from_le_bytes(self.take())
+    }
+}
+
 /// Reads and checks a checkpoint. Every size is checked against the file length before
 /// anything is allocated, so a corrupt file is an error, not a crash.
 pub fn read(path: &Path) -> Result<Saved, BakeError> {
     let bad = |what: &str| BakeError::Checkpoint(format!("{}: {what}", path.display()));
     let data = std::fs::read(path).map_err(|e| bad(&e.to_string()))?;
-    if data.len() < 16 + 32 + 8 || &data[..16] != MAGIC {
+    if data.len() < 16 + 32 + 8 || &data[..15] != MAGIC || !matches!(data[15], 1 | 2) {
         return Err(bad("not a Radiant bake checkpoint (or another version)"));
     }
+    let version = data[15];
     let (body, sum) = data.split_at(data.len() - 8);
     let mut h = Fnv::new();
     h.bytes(body);
     if sum != h.0.to_le_bytes() {
         return Err(bad("checksum mismatch: the file is damaged"));
     }
-    let u64_at = |o: usize| {
-        let mut a = [0u8; 8];
-        a.copy_from_slice(&body[o..o + 8]);
-        u64::from_le_bytes(a)
-    };
-    let fingerprint = u64_at(16);
-    let (n, nodes, nl) = (u64_at(24), u64_at(32), u64_at(40));
-    let expected =
-        48u128 + (u128::from(n) + 1) * 8 + u128::from(nl) * 8 + u128::from(n) + u128::from(n) * 24;
-    if expected != body.len() as u128 {
+    let mut c = Cursor { data: body, at: 16 };
+    let header = if version == 1 { 32 } else { 48 };
+    if body.len() < 16 + header {
         return Err(bad("sizes do not match the file length"));
     }
-    let (n, nl) = (n as usize, nl as usize);
-    let mut o = 48;
-    let mut row = Vec::with_capacity(n + 1);
-    for _ in 0..=n {
-        row.push(u64_at(o) as usize);
-        o += 8;
-    }
-    let mut src = Vec::with_capacity(nl);
-    for k in 0..nl {
-        let b = &body[o + 4 * k..o + 4 * k + 4];
-        src.push(u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
-    }
-    o += 4 * nl;
-    let mut ff = Vec::with_capacity(nl);
-    for k in 0..nl {
-        let b = &body[o + 4 * k..o + 4 * k + 4];
-        ff.push(f32::from_le_bytes([b[0], b[1], b[2], b[3]]));
-    }
-    o += 4 * nl;
-    let dead = body[o..o + n].iter().map(|&d| d != 0).collect();
-    o += n;
-    let mut radiosity = Vec::with_capacity(n);
-    for i in 0..n {
-        let at = |c: usize| {
-            let mut a = [0u8; 8];
-            a.copy_from_slice(&body[o + 24 * i + 8 * c..o + 24 * i + 8 * c + 8]);
-            f64::from_le_bytes(a)
+    let fingerprint = c.u64();
+    let (n, nodes, nl) = (c.u64(), c.u64(), c.u64());
+    let (nh, flags) = if version == 1 {
+        (0, 0)
+    } else {
+        (c.u64(), c.u64())
+    };
+    let (hidden, has_oracle) = (flags & 1 != 0, flags & 2 != 0);
+    let (n128, nl128, nh128) = (u128::from(n), u128::from(nl), u128::from(nh));
+    let expected = 16
+        + header as u128
+        + (n128 + 1) * 8
+        + nl128 * 8
+        + n128
+        + n128 * 24
+        + if hidden {
+            (n128 + 1) * 8 + nh128 * 4
+        } else {
+            0
+        }
+        + if has_oracle {
+            8 + u128::from(nodes) * 8
+        } else {
+            0
         };
-        radiosity.push([at(0), at(1), at(2)]);
+    if flags > 3 || (!hidden && nh != 0) || expected != body.len() as u128 {
+        return Err(bad("sizes do not match the file length"));
     }
-    // Structure: monotone rows ending at the link count, sources inside the mesh, finite values.
-    if row.first() != Some(&0)
-        || row.last() != Some(&nl)
-        || row.windows(2).any(|w| w[0] > w[1])
-        || src.iter().any(|&s| s as u64 >= nodes)
+    let (n, nl, nh) = (n as usize, nl as usize, nh as usize);
+    let row: Vec<usize> = (0..=n).map(|_| c.u64() as usize).collect();
+    let src: Vec<u32> = (0..nl).map(|_| c.u32()).collect();
+    let ff: Vec<f32> = (0..nl).map(|_| c.f32()).collect();
+    let dead: Vec<bool> = (0..n).map(|_| c.take::<1>()[0] != 0).collect();
+    let radiosity: Vec<Rgb> = (0..n).map(|_| [c.f64(), c.f64(), c.f64()]).collect();
+    let (hidden_row, hidden_src) = if hidden {
+        (
+            (0..=n).map(|_| c.u64() as usize).collect(),
+            (0..nh).map(|_| c.u32()).collect(),
+        )
+    } else {
+        (Vec::new(), Vec::new())
+    };
+    let oracle = has_oracle.then(|| {
+        let eps = c.f64();
+        ((0..nodes).map(|_| c.f64()).collect::<Vec<_>>(), eps)
+    });
+    // Structure: monotone rows ending at the link counts, sources inside the mesh, finite values.
+    let rows_ok = |row: &[usize], count: usize| {
+        row.first() == Some(&0)
+            && row.last() == Some(&count)
+            && row.windows(2).all(|w| w[0] <= w[1])
+    };
+    if !rows_ok(&row, nl)
+        || (hidden && !rows_ok(&hidden_row, nh))
+        || src.iter().chain(&hidden_src).any(|&s| s as u64 >= nodes)
         || ff.iter().any(|f| !f.is_finite() || *f < 0.0)
         || radiosity.iter().flatten().any(|b| !b.is_finite())
+        || oracle.as_ref().is_some_and(|(b, e)| {
+            !(e.is_finite() && *e > 0.0) || b.iter().any(|x| !x.is_finite() || *x < 0.0)
+        })
     {
         return Err(bad("inconsistent contents"));
     }
     Ok(Saved {
         fingerprint,
         nodes: nodes as usize,
-        links: Links { row, src, ff },
+        links: Links {
+            row,
+            src,
+            ff,
+            hidden_row,
+            hidden_src,
+        },
         dead,
         radiosity,
+        oracle,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A version-1 file (no fully occluded links, no oracle) is still read.
+    #[test]
+    fn reads_version_1() {
+        let mut buf = Vec::new();
+        buf.extend_from_slice(MAGIC);
+        buf.push(1);
+        // Fingerprint, one element, one node, one link.
+        for v in [42u64, 1, 1, 1] {
+            buf.extend_from_slice(&v.to_le_bytes());
+        }
+        for r in [0u64, 1] {
+            buf.extend_from_slice(&r.to_le_bytes());
+        }
+        buf.extend_from_slice(&0u32.to_le_bytes());
+        buf.extend_from_slice(&0.5f32.to_le_bytes());
+        buf.push(0);
+        for c in [1.0f64, 2.0, 3.0] {
+            buf.extend_from_slice(&c.to_le_bytes());
+        }
+        let mut h = Fnv::new();
+        h.bytes(&buf);
+        buf.extend_from_slice(&h.0.to_le_bytes());
+        let path = std::env::temp_dir().join(format!("radiant-v1-{}.ckpt", std::process::id()));
+        std::fs::write(&path, &buf).expect("write");
+        let saved = read(&path).expect("a version-1 checkpoint");
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(saved.fingerprint, 42);
+        assert_eq!(saved.links.src, [0]);
+        assert_eq!(saved.links.ff, [0.5]);
+        assert!(!saved.links.hidden_known());
+        assert!(saved.oracle.is_none());
+        assert_eq!(saved.radiosity, [[1.0, 2.0, 3.0]]);
+    }
+
+    /// Version 2 keeps the fully occluded links and the oracle.
+    #[test]
+    fn version_2_round_trips() {
+        let links = Links {
+            row: vec![0, 1, 1],
+            src: vec![2],
+            ff: vec![0.25],
+            hidden_row: vec![0, 0, 2],
+            hidden_src: vec![0, 1],
+        };
+        let path = std::env::temp_dir().join(format!("radiant-v2-{}.ckpt", std::process::id()));
+        let bhat = [0.5, 0.7, 0.9];
+        write(
+            &path,
+            7,
+            3,
+            &links,
+            &[false, true],
+            &[[0.1; 3], [0.2; 3]],
+            Some((&bhat, 0.02)),
+        )
+        .expect("write");
+        let saved = read(&path).expect("read");
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(saved.links.hidden_row, links.hidden_row);
+        assert_eq!(saved.links.hidden_src, links.hidden_src);
+        assert_eq!(saved.oracle, Some((bhat.to_vec(), 0.02)));
+        assert_eq!(saved.dead, [false, true]);
+    }
 }

@@ -112,8 +112,7 @@ impl System {
         let n = area.len();
         let mut links = Links {
             row: vec![0],
-            src: Vec::new(),
-            ff: Vec::new(),
+            ..Links::default()
         };
         for row in f {
             for (j, &v) in row.iter().enumerate() {

@@ -190,15 +190,26 @@ fn a_checkpoint_resumes_without_form_factors_and_refuses_other_scenes() {
     eprintln!("resume took {resume_s:.3} s");
 
     // Other geometry: refused.
-    let mut moved = scene.clone();
-    moved.triangles[0].vertices[0].x += 0.01;
+    let mut other = scene.clone();
+    other.triangles[0].vertices[0].x += 0.01;
     assert!(matches!(
-        Bake::resume(&moved, &p, &path),
+        Bake::resume(&other, &p, &path),
         Err(BakeError::Checkpoint(_))
     ));
-    // Other colours: resumed, as an edit.
+    // Other colours: resumed, as an edit. The checkpoint holds the refinement oracle its links
+    // were built with, so a geometry edit after it keeps their structure where that oracle
+    // still holds and gives exactly a fresh bake's links.
     let recoloured = edited(&scene, false);
-    assert!(Bake::resume(&recoloured, &p, &path).is_ok());
+    let mut resumed = Bake::resume(&recoloured, &p, &path).expect("resume recoloured");
+    let moved = moved_block(&recoloured, 0.03);
+    let stats = resumed
+        .edit_geometry(&moved)
+        .expect("a move after a resume");
+    let fresh = Bake::new(&moved, &p).expect("bake");
+    let (lk, fk) = (&resumed.system.links, &fresh.system.links);
+    assert!(lk.row == fk.row && lk.src == fk.src && lk.ff == fk.ff);
+    assert!(lk.hidden_row == fk.hidden_row && lk.hidden_src == fk.hidden_src);
+    assert!(stats.rows_walked * 10 < fresh.system.len(), "{stats:?}");
     // A checkpoint of a dark scene has no links: not resumed once something emits.
     let mut dark = scene.clone();
     for s in &mut dark.surfaces {
@@ -276,6 +287,22 @@ fn moving_a_block_keeps_untouched_form_factors_and_matches_a_fresh_bake() {
         assert_eq!(bake.system.links.row, fresh.system.links.row, "{ff:?}");
         assert_eq!(bake.system.links.src, fresh.system.links.src, "{ff:?}");
         assert_eq!(bake.system.links.ff, fresh.system.links.ff, "{ff:?}");
+        assert_eq!(
+            bake.system.links.hidden_row, fresh.system.links.hidden_row,
+            "{ff:?}"
+        );
+        assert_eq!(
+            bake.system.links.hidden_src, fresh.system.links.hidden_src,
+            "{ff:?}"
+        );
+        // Receivers that stayed kept their rows' structure: only the block's own elements
+        // walked the whole hierarchy again.
+        let n = bake.system.len();
+        assert!(
+            stats.rows_walked * 10 < n,
+            "{ff:?}: {} of {n} rows walked again",
+            stats.rows_walked
+        );
         let (a, b) = (bake.radiosity(), &fresh.radiosity);
         let (worst, peak) = worst_and_peak(&a, b);
         assert!(worst <= 1e-4 * peak, "{ff:?}: differs by {worst}");
@@ -357,6 +384,17 @@ fn removing_and_adding_a_block_keeps_untouched_form_factors_and_matches_a_fresh_
         assert!(lk.row == fk.row, "{what}: rows differ ({l} vs {f} links)");
         assert!(lk.src == fk.src, "{what}: link sources differ");
         assert!(lk.ff == fk.ff, "{what}: form factors differ");
+        assert!(
+            lk.hidden_row == fk.hidden_row && lk.hidden_src == fk.hidden_src,
+            "{what}: fully occluded links differ"
+        );
+        // Only added receivers walk the whole hierarchy again.
+        let n = bake.system.len();
+        assert!(
+            stats.rows_walked * 10 < n,
+            "{what}: {} of {n} rows walked again",
+            stats.rows_walked
+        );
         let (a, b) = (bake.radiosity(), &fresh.radiosity);
         let (worst, peak) = worst_and_peak(&a, b);
         assert!(
