@@ -402,31 +402,37 @@ fn extent(points: &[DVec3], axis: DVec3) -> (f64, f64) {
 }
 
 /// A triangle seen from a point: its vertices relative to the point, the unit normals of the
-/// planes through the point and each edge (towards the triangle; zero when seen edge-on), and
-/// its own plane (unit normal, pointing away from the point, and offset).
+/// planes through the point and each edge (towards the triangle; zero when seen edge-on), its
+/// own plane (unit normal, pointing away from the point, and offset), its bounding radius and a
+/// lower bound on its distance from the point.
 #[derive(Clone, Copy, Debug)]
 pub struct Pyramid {
     v: [DVec3; 3],
     edge: [DVec3; 3],
     normal: DVec3,
     offset: f64,
+    radius: f64,
+    near: f64,
 }
 
 impl Pyramid {
     /// Triangle `tri` seen from `x`.
     pub fn new(x: DVec3, tri: &[DVec3; 3]) -> Pyramid {
         let v = [tri[0] - x, tri[1] - x, tri[2] - x];
-        let unit = |n: DVec3| {
-            let l = n.length();
-            if l > 0.0 && l.is_finite() {
-                n / l
+        // The unit normal of `a × b`, none when the two are (nearly) parallel: rounding would
+        // give it an arbitrary direction.
+        let unit = |a: DVec3, b: DVec3| {
+            let n = a.cross(b);
+            let l2 = n.length_squared();
+            if l2 > 1e-24 * a.length_squared() * b.length_squared() && l2.is_finite() {
+                n / l2.sqrt()
             } else {
                 DVec3::ZERO
             }
         };
         let edge = std::array::from_fn(|k| {
             let (a, b, c) = (v[k], v[(k + 1) % 3], v[(k + 2) % 3]);
-            let n = unit(a.cross(b));
+            let n = unit(a, b);
             // Towards the third vertex; none when the point is in the triangle's plane.
             let side = n.dot(c);
             if side > 0.0 {
@@ -437,7 +443,7 @@ impl Pyramid {
                 DVec3::ZERO
             }
         });
-        let mut normal = unit((v[1] - v[0]).cross(v[2] - v[0]));
+        let mut normal = unit(v[1] - v[0], v[2] - v[0]);
         let mut offset = normal.dot(v[0]);
         // The point (the origin) on the negative side; in the plane: no depth test.
         if offset < 0.0 {
@@ -447,40 +453,62 @@ impl Pyramid {
             normal = DVec3::ZERO;
             offset = 0.0;
         }
+        let centre = (v[0] + v[1] + v[2]) / 3.0;
+        let radius = v.iter().map(|p| p.distance(centre)).fold(0.0, f64::max);
         Pyramid {
             v,
             edge,
             normal,
             offset,
+            radius,
+            near: (centre.length() - radius).max(0.0),
         }
     }
 
-    /// Whether the shaft from the point to `self` (the source) may cross `other`, within `pad`:
-    /// false only when a plane separates them. Seen from the point, two triangles overlap
-    /// unless an edge plane of one separates them; and the shaft crosses `other` only if the
+    /// Whether rays from the point to `self` (the source) may cross `other`: false only when a
+    /// plane separates them with room to spare. Seen from the point, two triangles overlap
+    /// unless an edge plane of one separates them; and a ray crosses `other` only if the
     /// source is not wholly in front of `other`'s plane and `other` not wholly beyond the
-    /// source's. Both must be seen from the same point.
-    pub fn shaft_may_cross(&self, other: &Pyramid, pad: f64) -> bool {
-        !(other.keeps_clear_of(&self.v, pad) || self.shaft_clears(other, pad))
+    /// source's. `margin` is how far the rays may stray from the exact shaft (their origin's
+    /// offset and rounding); a ray caster also sees `other` a little past its edges
+    /// ([`Pyramid::slack`]). Both must be seen from the same point.
+    pub fn shaft_may_cross(&self, other: &Pyramid, margin: f64) -> bool {
+        !(other.keeps_clear_of(&self.v, margin) || self.shaft_clears(other, margin))
     }
 
-    /// Whether this triangle's edge planes separate the triangle `src` (vertices relative to
-    /// the point) from it, or `src` lies wholly in front of it: then no shaft from the point
-    /// to `src` crosses it. Needs nothing of `src` but its vertices.
-    fn keeps_clear_of(&self, src: &[DVec3; 3], pad: f64) -> bool {
-        self.edge.iter().any(|&n| below(n, 0.0, src, pad))
-            || below(self.normal, self.offset, src, pad)
+    /// How far past this triangle a ray may still hit it: `margin`, and the ray caster's
+    /// watertight slack of 1e-6 of the triangle's heights (`radiant_visibility`), doubled.
+    fn slack(&self, margin: f64) -> f64 {
+        margin + 2e-6 * 2.0 * self.radius
     }
 
-    /// Whether this (source) triangle's edge planes separate `other` from it, or `other` lies
-    /// wholly beyond it.
-    fn shaft_clears(&self, other: &Pyramid, pad: f64) -> bool {
-        self.edge.iter().any(|&n| below(n, 0.0, &other.v, pad))
+    /// Whether this (changed) triangle's edge planes keep rays from the point to the triangle
+    /// `src` (vertices relative to the point) clear of it, or `src` lies wholly in front of it.
+    /// Needs nothing of `src` but its vertices. An edge plane passes through the point, so a
+    /// source vertex `d` below it is only `d × near / far` below it where the rays pass this
+    /// triangle: the room asked for is scaled up by that ratio.
+    fn keeps_clear_of(&self, src: &[DVec3; 3], margin: f64) -> bool {
+        let slack = self.slack(margin);
+        let far = src.iter().map(|p| p.length()).fold(0.0, f64::max);
+        let edges = self.near > 0.0
+            && far.is_finite()
+            && self
+                .edge
+                .iter()
+                .any(|&n| below(n, 0.0, src, slack * far / self.near));
+        edges || (self.offset > margin && below(self.normal, self.offset, src, margin))
+    }
+
+    /// Whether this (source) triangle's edge planes keep `other` clear of the rays to it, or
+    /// `other` lies wholly beyond it.
+    fn shaft_clears(&self, other: &Pyramid, margin: f64) -> bool {
+        let slack = other.slack(margin);
+        self.edge.iter().any(|&n| below(n, 0.0, &other.v, slack))
             || (self.normal != DVec3::ZERO
                 && other
                     .v
                     .iter()
-                    .all(|p| self.normal.dot(*p) - self.offset > pad))
+                    .all(|p| self.normal.dot(*p) - self.offset > slack))
     }
 }
 
@@ -496,6 +524,8 @@ fn below(n: DVec3, d: f64, q: &[DVec3; 3], pad: f64) -> bool {
 pub struct ChangeSet {
     groups: Vec<Group>,
     count: usize,
+    /// How far the rays of a link may stray from its exact shaft.
+    margin: f64,
 }
 
 /// Consecutive changed triangles (from `first` in the set) and their padded bounds.
@@ -513,12 +543,13 @@ pub struct SeenFrom {
 }
 
 impl ChangeSet {
-    /// Past the `f32` rounding of the visibility rays (the local frame has unit extent).
-    const PAD: f64 = 1e-6;
+    /// Past the `f32` rounding of the visibility rays' ends (the local frame has unit extent).
+    pub const ROUNDING: f64 = 1e-6;
 
-    /// The change made of `triangles`.
-    pub fn new(triangles: &[[DVec3; 3]]) -> ChangeSet {
-        let pad = DVec3::splat(Self::PAD);
+    /// The change made of `triangles`, for rays that stray at most `margin` from the exact
+    /// shaft between a receiver's centroid and a source (at least [`ChangeSet::ROUNDING`]).
+    pub fn new(triangles: &[[DVec3; 3]], margin: f64) -> ChangeSet {
+        let margin = margin.max(Self::ROUNDING);
         let per_group = triangles.len().div_ceil(64).max(1);
         let groups = triangles
             .chunks(per_group)
@@ -527,6 +558,9 @@ impl ChangeSet {
                 let triangles: Vec<_> = chunk
                     .iter()
                     .map(|v| {
+                        // Padded by the most a ray may stray and the ray caster's slack.
+                        let size = (v[1] - v[0]).length() + (v[2] - v[0]).length();
+                        let pad = DVec3::splat(margin + 4e-6 * size);
                         (
                             *v,
                             v[0].min(v[1]).min(v[2]) - pad,
@@ -549,6 +583,7 @@ impl ChangeSet {
         ChangeSet {
             groups,
             count: triangles.len(),
+            margin,
         }
     }
 
@@ -614,11 +649,11 @@ impl ChangeSet {
                 }
                 // The changed triangle's own planes first: they need nothing of the source but
                 // its vertices (and usually settle it).
-                if slot.1.keeps_clear_of(&rel, Self::PAD) {
+                if slot.1.keeps_clear_of(&rel, self.margin) {
                     continue;
                 }
                 let src = source.get_or_insert_with(|| Pyramid::new(x, tri));
-                if !src.shaft_clears(&slot.1, Self::PAD) {
+                if !src.shaft_clears(&slot.1, self.margin) {
                     hit |= 1 << k;
                     break;
                 }
@@ -710,11 +745,11 @@ pub fn update(
         .filter(|&r| !clean[r])
         .map(|r| mesh.roots[r])
         .collect();
+    let generation = UPDATES.fetch_add(1, Ordering::Relaxed) + 1;
     let chunks: Vec<(Chunk, UpdateStats)> = (0..n.div_ceil(CHUNK))
         .into_par_iter()
         .map_init(
             || UpdateScratch {
-                meets: (vec![(u32::MAX, 0); mesh.nodes.len()], SeenFrom::default()),
                 ..UpdateScratch::default()
             },
             |scratch, c| {
@@ -735,6 +770,7 @@ pub fn update(
                         &clean,
                         &dirty_roots,
                         &leaf_lo,
+                        generation,
                         scratch,
                         &mut stats,
                     );
@@ -780,6 +816,7 @@ fn update_row(
     clean: &[bool],
     dirty_roots: &[u32],
     leaf_lo: &[u32],
+    generation: u64,
     scratch: &mut UpdateScratch,
     stats: &mut UpdateStats,
 ) {
@@ -796,7 +833,7 @@ fn update_row(
         sub,
         sub_k,
         out,
-        meets,
+        seen,
     } = scratch;
     let r = mesh.leaf_node(leaf as u32);
     let receiver_moved = change.moved_root[r.root as usize];
@@ -864,16 +901,23 @@ fn update_row(
     // Kept links whose shaft may cross the change, culled down the hierarchy: a node's shaft
     // lies inside its parent's.
     if !change.triangles.is_empty() {
-        for c in cands.iter_mut().filter(|c| !c.need) {
-            c.need = link_meets(
+        NODE_MEMO.with_borrow_mut(|memo| {
+            if memo.len() < mesh.nodes.len() {
+                memo.resize(mesh.nodes.len(), (0, 0));
+            }
+            let mut q = ShaftQuery {
                 mesh,
-                change.triangles,
-                r.centroid,
-                c.src,
-                leaf as u32,
-                meets,
-            );
-        }
+                change: change.triangles,
+                x: r.centroid,
+                leaf: leaf as u32,
+                stamp: (generation << 32) | leaf as u64,
+                memo,
+                seen,
+            };
+            for c in cands.iter_mut().filter(|c| !c.need) {
+                c.need = q.link_meets(c.src);
+            }
+        });
     }
     if !per_link && cands.iter().any(|c| c.need) {
         cands.iter_mut().for_each(|c| c.need = true);
@@ -920,55 +964,70 @@ struct UpdateScratch {
     sub: Walked,
     sub_k: Vec<usize>,
     out: Vec<f32>,
-    /// Per node: the receiver it was last tested for, and whether its shaft meets the change.
-    meets: (Vec<(u32, u64)>, SeenFrom),
+    /// The changed triangles seen from the current receiver.
+    seen: SeenFrom,
 }
 
-/// Whether the shaft from `x` (receiver `leaf`) to link source `s` may cross the change: the
-/// groups its parent's shaft may cross are found first (cached per receiver in `memo`), since a
-/// child's triangle lies inside its parent's, and only those are tested.
-fn link_meets(
-    mesh: &Mesh,
-    change: &ChangeSet,
-    x: DVec3,
-    s: u32,
-    leaf: u32,
-    scratch: &mut (Vec<(u32, u64)>, SeenFrom),
-) -> bool {
-    let node = &mesh.nodes[s as usize];
-    let within = if node.parent == u32::MAX {
-        change.all()
-    } else {
-        groups_met(mesh, change, x, node.parent, leaf, scratch)
-    };
-    within != 0 && change.meets(leaf, x, &node.v, within, true, &mut scratch.1) != 0
+thread_local! {
+    /// Per node: the stamp (update number and receiver) it was last tested for, and the change
+    /// groups its shaft may cross. Per thread and kept across updates, so it is allocated once,
+    /// not for every parallel job.
+    static NODE_MEMO: std::cell::RefCell<Vec<(u64, u64)>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
-/// The change groups the shaft from `x` (receiver `leaf`) to node `s` may cross, cached.
-fn groups_met(
-    mesh: &Mesh,
-    change: &ChangeSet,
+/// Numbers the updates, for [`NODE_MEMO`]'s stamps.
+static UPDATES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// What the shaft tests of one receiver share: its point and number, the memo's stamp, the
+/// per-node memo and the changed triangles seen from it.
+struct ShaftQuery<'a> {
+    mesh: &'a Mesh,
+    change: &'a ChangeSet,
     x: DVec3,
-    s: u32,
     leaf: u32,
-    scratch: &mut (Vec<(u32, u64)>, SeenFrom),
-) -> u64 {
-    if scratch.0[s as usize].0 == leaf {
-        return scratch.0[s as usize].1;
+    stamp: u64,
+    memo: &'a mut [(u64, u64)],
+    seen: &'a mut SeenFrom,
+}
+
+impl ShaftQuery<'_> {
+    /// Whether the shaft to link source `s` may cross the change: the groups its parent's
+    /// shaft may cross are found first (memoised), since a child's triangle lies inside its
+    /// parent's, and only those are tested.
+    fn link_meets(&mut self, s: u32) -> bool {
+        let node = &self.mesh.nodes[s as usize];
+        let within = if node.parent == u32::MAX {
+            self.change.all()
+        } else {
+            self.groups_met(node.parent)
+        };
+        within != 0
+            && self
+                .change
+                .meets(self.leaf, self.x, &node.v, within, true, self.seen)
+                != 0
     }
-    let node = &mesh.nodes[s as usize];
-    let within = if node.parent == u32::MAX {
-        change.all()
-    } else {
-        groups_met(mesh, change, x, node.parent, leaf, scratch)
-    };
-    let hit = if within == 0 {
-        0
-    } else {
-        change.meets(leaf, x, &node.v, within, false, &mut scratch.1)
-    };
-    scratch.0[s as usize] = (leaf, hit);
-    hit
+
+    /// The change groups the shaft to node `s` may cross, memoised.
+    fn groups_met(&mut self, s: u32) -> u64 {
+        if self.memo[s as usize].0 == self.stamp {
+            return self.memo[s as usize].1;
+        }
+        let node = &self.mesh.nodes[s as usize];
+        let within = if node.parent == u32::MAX {
+            self.change.all()
+        } else {
+            self.groups_met(node.parent)
+        };
+        let hit = if within == 0 {
+            0
+        } else {
+            self.change
+                .meets(self.leaf, self.x, &node.v, within, false, self.seen)
+        };
+        self.memo[s as usize] = (self.stamp, hit);
+        hit
+    }
 }
 
 /// A freshly walked link: computed.
@@ -1017,7 +1076,7 @@ mod shaft_tests {
             let src = [point(&mut rng), point(&mut rng), point(&mut rng)];
             let other = [point(&mut rng), point(&mut rng), point(&mut rng)];
             let may = Pyramid::new(x, &src).shaft_may_cross(&Pyramid::new(x, &other), 0.0);
-            let set = ChangeSet::new(&[other]);
+            let set = ChangeSet::new(&[other], 0.0);
             let met = set.meets(0, x, &src, set.all(), false, &mut SeenFrom::default()) != 0;
             // Segments from the point to points of the source.
             let hits = (0..64).any(|_| {
@@ -1060,6 +1119,34 @@ mod shaft_tests {
         assert!(!s.shaft_may_cross(&Pyramid::new(x, &behind), 1e-6));
     }
 
+    /// A source edge that grazes a changed triangle seen from close by: the ray caster's
+    /// slack past the triangle's edges must keep this shaft (it once did not).
+    #[test]
+    fn a_grazing_shaft_near_the_receiver_is_kept() {
+        let x = DVec3::ZERO;
+        let changed = [
+            DVec3::new(0.01, -0.05, 0.0),
+            DVec3::new(0.01, 0.05, 0.0),
+            DVec3::new(0.01, 0.0, -0.1),
+        ];
+        let src = [
+            DVec3::new(0.5, -0.1, 2e-6),
+            DVec3::new(0.5, 0.1, 2e-6),
+            DVec3::new(0.5, 0.0, 0.1),
+        ];
+        let set = ChangeSet::new(&[changed], 0.0);
+        assert_ne!(
+            set.meets(0, x, &src, set.all(), false, &mut SeenFrom::default()),
+            0
+        );
+        // Farther off, with room to spare, the same shaft is culled.
+        let lifted = src.map(|p| p + DVec3::new(0.0, 0.0, 0.01));
+        assert_eq!(
+            set.meets(1, x, &lifted, set.all(), false, &mut SeenFrom::default()),
+            0
+        );
+    }
+
     #[test]
     fn many_changed_triangles_are_grouped_and_still_found() {
         // 200 small triangles along a line: more than one per group.
@@ -1073,7 +1160,7 @@ mod shaft_tests {
                 ]
             })
             .collect();
-        let set = ChangeSet::new(&tris);
+        let set = ChangeSet::new(&tris, 0.0);
         assert_eq!(set.all().count_ones(), 50); // four triangles a group
         let mut seen = SeenFrom::default();
         // A shaft through the 150th triangle's interior, and one far from all of them.
