@@ -94,25 +94,9 @@ fn solvers(c: &mut Criterion) {
     g.finish();
 }
 
-/// The builtin box with the short block moved by `dx` along x.
-fn moved_block(scene: &radiant_scene::Scene, dx: f64) -> radiant_scene::Scene {
-    let mut s = scene.clone();
-    for t in &mut s.triangles {
-        if s.surfaces[t.surface as usize]
-            .name
-            .starts_with("short_block")
-        {
-            for v in &mut t.vertices {
-                v.x += dx;
-            }
-        }
-    }
-    s
-}
-
 fn edits(c: &mut Criterion) {
     let scene = radiant_scene::builtin("cornell-box").expect("builtin");
-    let moved = moved_block(&scene, 0.05);
+    let moved = radiant_radiosity::scenes::translated(&scene, "short_block", DVec3::X * 0.05);
     let mut bake = Bake::new(&scene, &BakeParams::default()).expect("bake");
     let mut g = c.benchmark_group("cornell_default_edit");
     g.sample_size(10).measurement_time(Duration::from_secs(8));

@@ -745,48 +745,40 @@ pub fn update(
         .filter(|&r| !clean[r])
         .map(|r| mesh.roots[r])
         .collect();
-    let generation = UPDATES.fetch_add(1, Ordering::Relaxed) + 1;
+    let rows = RowUpdate {
+        ctx,
+        method,
+        oracle,
+        params,
+        old,
+        change,
+        per_link,
+        fast,
+        clean: &clean,
+        dirty_roots: &dirty_roots,
+        leaf_lo: &leaf_lo,
+        generation: UPDATES.fetch_add(1, Ordering::Relaxed) + 1,
+    };
     let chunks: Vec<(Chunk, UpdateStats)> = (0..n.div_ceil(CHUNK))
         .into_par_iter()
-        .map_init(
-            || UpdateScratch {
-                ..UpdateScratch::default()
-            },
-            |scratch, c| {
-                let (first, last) = (c * CHUNK, ((c + 1) * CHUNK).min(n));
-                let mut chunk = Chunk::default();
-                let mut stats = UpdateStats::default();
-                for leaf in first..last {
-                    update_row(
-                        ctx,
-                        method,
-                        oracle,
-                        params,
-                        old,
-                        change,
-                        leaf,
-                        per_link,
-                        fast,
-                        &clean,
-                        &dirty_roots,
-                        &leaf_lo,
-                        generation,
-                        scratch,
-                        &mut stats,
-                    );
-                    chunk.push_row(
-                        scratch
-                            .cands
-                            .iter()
-                            .map(|c| (c.src, c.value.unwrap_or(0.0))),
-                    );
-                }
-                (chunk, stats)
-            },
-        )
+        .map_init(UpdateScratch::default, |scratch, c| {
+            let (first, last) = (c * CHUNK, ((c + 1) * CHUNK).min(n));
+            let mut chunk = Chunk::default();
+            let mut stats = UpdateStats::default();
+            for leaf in first..last {
+                rows.update_row(leaf, scratch, &mut stats);
+                chunk.push_row(
+                    scratch
+                        .cands
+                        .iter()
+                        .map(|c| (c.src, c.value.unwrap_or(0.0))),
+                );
+            }
+            (chunk, stats)
+        })
         .collect();
     let mut stats = UpdateStats::default();
-    let rows = chunks
+    let chunks = chunks
         .into_iter()
         .map(|(chunk, s)| {
             stats.recomputed += s.recomputed;
@@ -795,157 +787,175 @@ pub fn update(
             chunk
         })
         .collect();
-    (assemble(n, rows), stats)
+    (assemble(n, chunks), stats)
 }
 
-/// One receiver's row of [`update`], left in `scratch.cands`.
-#[expect(
-    clippy::too_many_arguments,
-    reason = "the update's inputs and one row's scratch"
-)]
-fn update_row(
-    ctx: &FfContext,
-    method: &dyn FormFactorMethod,
-    oracle: Oracle,
-    params: &LinkParams,
-    old: &Links,
-    change: &Change,
-    leaf: usize,
+/// What every row of one [`update`] shares.
+struct RowUpdate<'a> {
+    ctx: &'a FfContext<'a>,
+    method: &'a dyn FormFactorMethod,
+    oracle: Oracle<'a>,
+    params: &'a LinkParams,
+    old: &'a Links,
+    change: &'a Change<'a>,
+    /// Whether the method computes links one by one (else a row is computed whole).
     per_link: bool,
+    /// Whether rows of receivers that stayed may keep their structure on clean roots.
     fast: bool,
-    clean: &[bool],
-    dirty_roots: &[u32],
-    leaf_lo: &[u32],
+    /// Per root: its links can be kept as they were.
+    clean: &'a [bool],
+    /// The root nodes that are not clean, in order.
+    dirty_roots: &'a [u32],
+    /// Per node: its first leaf (the order of a row).
+    leaf_lo: &'a [u32],
+    /// This update's number, for the shaft memo's stamps.
     generation: u64,
-    scratch: &mut UpdateScratch,
-    stats: &mut UpdateStats,
-) {
-    let mesh = ctx.mesh;
-    let UpdateScratch {
-        stack,
-        walked,
-        old_row: row_old,
-        visible,
-        occluded,
-        cands,
-        spare,
-        kept,
-        sub,
-        sub_k,
-        out,
-        seen,
-    } = scratch;
-    let r = mesh.leaf_node(leaf as u32);
-    let receiver_moved = change.moved_root[r.root as usize];
-    row_old.clear();
-    let o = change.old_of_new_leaf[leaf];
-    if o != u32::MAX {
-        old_row(
+}
+
+impl RowUpdate<'_> {
+    /// One receiver's row, left in `scratch.cands`.
+    fn update_row(&self, leaf: usize, scratch: &mut UpdateScratch, stats: &mut UpdateStats) {
+        let RowUpdate {
+            ctx,
+            method,
+            oracle,
+            params,
             old,
-            o as usize,
-            change.new_of_old_node,
+            change,
+            per_link,
+            fast,
+            clean,
+            dirty_roots,
             leaf_lo,
+            generation,
+        } = *self;
+        let mesh = ctx.mesh;
+        let UpdateScratch {
+            stack,
+            walked,
+            old_row: row_old,
             visible,
             occluded,
-            row_old,
-        );
-    }
-    cands.clear();
-    walked.clear();
-    // Rows that keep their structure on clean roots walk only the others.
-    let keep = fast && !receiver_moved && o != u32::MAX;
-    if !keep {
-        stats.rows_walked += 1;
-    }
-    let roots = if keep { dirty_roots } else { &mesh.roots };
-    refine(mesh, leaf as u32, roots, oracle, params, stack, walked);
-    // Old values of walked links by merge on first leaf (both rows are sorted by it).
-    let mut at = 0;
-    for k in 0..walked.src.len() {
-        let s = walked.src[k];
-        while at < row_old.len() && leaf_lo[row_old[at].0 as usize] < leaf_lo[s as usize] {
-            at += 1;
+            cands,
+            spare,
+            kept,
+            sub,
+            sub_k,
+            out,
+            seen,
+        } = scratch;
+        let r = mesh.leaf_node(leaf as u32);
+        let receiver_moved = change.moved_root[r.root as usize];
+        row_old.clear();
+        let o = change.old_of_new_leaf[leaf];
+        if o != u32::MAX {
+            old_row(
+                old,
+                o as usize,
+                change.new_of_old_node,
+                leaf_lo,
+                visible,
+                occluded,
+                row_old,
+            );
         }
-        let mut c = new_cand(walked, k);
-        if at < row_old.len() && row_old[at].0 == s {
-            c.value = Some(row_old[at].1);
-        }
-        let resampled = change.old_oracle.is_some_and(|o| {
-            samples_for(walked.f[k] * o.bhat[s as usize], o.eps, params) != walked.samples[k]
-        });
-        c.need = receiver_moved
-            || change.moved_root[mesh.nodes[s as usize].root as usize]
-            || c.value.is_none()
-            || resampled;
-        cands.push(c);
-    }
-    if keep {
-        // The clean roots' links as they were, merged in (disjoint nodes: distinct first leaves).
-        kept.clear();
-        kept.extend(
-            row_old
-                .iter()
-                .filter(|(s, _)| clean[mesh.nodes[*s as usize].root as usize])
-                .map(|&(s, v)| Cand {
-                    src: s,
-                    f: f64::NAN,
-                    samples: 0,
-                    value: Some(v),
-                    need: false,
-                }),
-        );
-        std::mem::swap(cands, spare);
         cands.clear();
-        merge_by(spare, kept, |c| leaf_lo[c.src as usize], cands);
-    }
-    // Kept links whose shaft may cross the change, culled down the hierarchy: a node's shaft
-    // lies inside its parent's.
-    if !change.triangles.is_empty() {
-        NODE_MEMO.with_borrow_mut(|memo| {
-            if memo.len() < mesh.nodes.len() {
-                memo.resize(mesh.nodes.len(), (0, 0));
-            }
-            let mut q = ShaftQuery {
-                mesh,
-                change: change.triangles,
-                x: r.centroid,
-                leaf: leaf as u32,
-                stamp: (generation << 32) | leaf as u64,
-                memo,
-                seen,
-            };
-            for c in cands.iter_mut().filter(|c| !c.need) {
-                c.need = q.link_meets(c.src);
-            }
-        });
-    }
-    if !per_link && cands.iter().any(|c| c.need) {
-        cands.iter_mut().for_each(|c| c.need = true);
-    }
-    sub.clear();
-    sub_k.clear();
-    for (k, c) in cands.iter_mut().enumerate() {
-        if c.need {
-            if c.f.is_nan() {
-                // A kept link computed again: its oracle values, as the walk gives them.
-                let node = &mesh.nodes[c.src as usize];
-                c.f = point_to_triangle(r.centroid, r.normal, &node.v, node.normal);
-                c.samples = samples_for(c.f * oracle.bhat[c.src as usize], oracle.eps, params);
-            }
-            sub.push(c.src, c.f, c.samples);
-            sub_k.push(k);
+        walked.clear();
+        // Rows that keep their structure on clean roots walk only the others.
+        let keep = fast && !receiver_moved && o != u32::MAX;
+        if !keep {
+            stats.rows_walked += 1;
         }
-    }
-    if !sub.src.is_empty() {
-        out.clear();
-        out.resize(sub.src.len(), 0.0f32);
-        method.compute(ctx, &sub.as_row(leaf as u32), out);
-        for (j, &k) in sub_k.iter().enumerate() {
-            cands[k].value = Some(out[j]);
+        let roots = if keep { dirty_roots } else { &mesh.roots };
+        refine(mesh, leaf as u32, roots, oracle, params, stack, walked);
+        // Old values of walked links by merge on first leaf (both rows are sorted by it).
+        let mut at = 0;
+        for k in 0..walked.src.len() {
+            let s = walked.src[k];
+            while at < row_old.len() && leaf_lo[row_old[at].0 as usize] < leaf_lo[s as usize] {
+                at += 1;
+            }
+            let mut c = new_cand(walked, k);
+            if at < row_old.len() && row_old[at].0 == s {
+                c.value = Some(row_old[at].1);
+            }
+            let resampled = change.old_oracle.is_some_and(|o| {
+                samples_for(walked.f[k] * o.bhat[s as usize], o.eps, params) != walked.samples[k]
+            });
+            c.need = receiver_moved
+                || change.moved_root[mesh.nodes[s as usize].root as usize]
+                || c.value.is_none()
+                || resampled;
+            cands.push(c);
         }
+        if keep {
+            // The clean roots' links as they were, merged in (disjoint nodes: distinct first leaves).
+            kept.clear();
+            kept.extend(
+                row_old
+                    .iter()
+                    .filter(|(s, _)| clean[mesh.nodes[*s as usize].root as usize])
+                    .map(|&(s, v)| Cand {
+                        src: s,
+                        f: f64::NAN,
+                        samples: 0,
+                        value: Some(v),
+                        need: false,
+                    }),
+            );
+            std::mem::swap(cands, spare);
+            cands.clear();
+            merge_by(spare, kept, |c| leaf_lo[c.src as usize], cands);
+        }
+        // Kept links whose shaft may cross the change, culled down the hierarchy: a node's shaft
+        // lies inside its parent's.
+        if !change.triangles.is_empty() {
+            NODE_MEMO.with_borrow_mut(|memo| {
+                if memo.len() < mesh.nodes.len() {
+                    memo.resize(mesh.nodes.len(), (0, 0));
+                }
+                let mut q = ShaftQuery {
+                    mesh,
+                    change: change.triangles,
+                    x: r.centroid,
+                    leaf: leaf as u32,
+                    stamp: (generation << 32) | leaf as u64,
+                    memo,
+                    seen,
+                };
+                for c in cands.iter_mut().filter(|c| !c.need) {
+                    c.need = q.link_meets(c.src);
+                }
+            });
+        }
+        if !per_link && cands.iter().any(|c| c.need) {
+            cands.iter_mut().for_each(|c| c.need = true);
+        }
+        sub.clear();
+        sub_k.clear();
+        for (k, c) in cands.iter_mut().enumerate() {
+            if c.need {
+                if c.f.is_nan() {
+                    // A kept link computed again: its oracle values, as the walk gives them.
+                    let node = &mesh.nodes[c.src as usize];
+                    c.f = point_to_triangle(r.centroid, r.normal, &node.v, node.normal);
+                    c.samples = samples_for(c.f * oracle.bhat[c.src as usize], oracle.eps, params);
+                }
+                sub.push(c.src, c.f, c.samples);
+                sub_k.push(k);
+            }
+        }
+        if !sub.src.is_empty() {
+            out.clear();
+            out.resize(sub.src.len(), 0.0f32);
+            method.compute(ctx, &sub.as_row(leaf as u32), out);
+            for (j, &k) in sub_k.iter().enumerate() {
+                cands[k].value = Some(out[j]);
+            }
+        }
+        stats.recomputed += sub.src.len();
+        stats.kept += cands.len() - sub.src.len();
     }
-    stats.recomputed += sub.src.len();
-    stats.kept += cands.len() - sub.src.len();
 }
 
 /// Per-thread scratch of [`update`].

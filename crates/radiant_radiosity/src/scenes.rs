@@ -63,6 +63,20 @@ pub fn add_surface(
     id
 }
 
+/// `scene` with the triangles of every surface whose name starts with `prefix` moved by
+/// `offset` (a rigid move, as an editor makes one).
+pub fn translated(scene: &Scene, prefix: &str, offset: DVec3) -> Scene {
+    let mut s = scene.clone();
+    for t in &mut s.triangles {
+        if s.surfaces[t.surface as usize].name.starts_with(prefix) {
+            for v in &mut t.vertices {
+                *v += offset;
+            }
+        }
+    }
+    s
+}
+
 /// The furnace: a closed unit cube, every wall with reflectance `rho` and emission `e`.
 /// The exact radiosity is `e / (1 − ρ)` everywhere.
 pub fn furnace(rho: f64, e: f64) -> Scene {

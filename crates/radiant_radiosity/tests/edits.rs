@@ -249,18 +249,7 @@ fn a_checkpoint_resumes_without_form_factors_and_refuses_other_scenes() {
 
 /// The builtin box with the short block moved by `dx` metres along x.
 fn moved_block(scene: &Scene, dx: f64) -> Scene {
-    let mut s = scene.clone();
-    for t in &mut s.triangles {
-        if s.surfaces[t.surface as usize]
-            .name
-            .starts_with("short_block")
-        {
-            for v in &mut t.vertices {
-                v.x += dx;
-            }
-        }
-    }
-    s
+    radiant_radiosity::scenes::translated(scene, "short_block", glam::DVec3::X * dx)
 }
 
 #[test]
@@ -320,14 +309,7 @@ fn moving_a_block_keeps_untouched_form_factors_and_matches_a_fresh_bake() {
     let mut p = params(SolverKind::GaussSeidel);
     p.form_factors = radiant_radiosity::FormFactorKind::Analytic;
     let mut bake = Bake::new(&scene, &p).expect("bake");
-    let mut wider = scene.clone();
-    for t in &mut wider.triangles {
-        if wider.surfaces[t.surface as usize].name == "left_wall" {
-            for v in &mut t.vertices {
-                v.x += 0.1;
-            }
-        }
-    }
+    let wider = radiant_radiosity::scenes::translated(&scene, "left_wall", glam::DVec3::X * 0.1);
     assert!(matches!(
         bake.edit_geometry(&wider),
         Err(BakeError::NeedsRebuild)
