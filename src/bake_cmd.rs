@@ -149,30 +149,12 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     }
     ensure_dir(&args.out)?;
 
-    let (bake, pb) = crate::start_bake(&scene, &params, args.checkpoint.as_deref())?;
-    pb.set_length(1000);
-    pb.set_position(0);
-    let tol = params.solver_params.tolerance;
-    let result = bake.run_to_end(&mut |BakeEvent::Solve(p, t)| {
-        // Progress in log-residual, from 1 down to the tolerance.
-        let frac = if p.residual > 0.0 {
-            (p.residual.ln() / tol.ln()).clamp(0.0, 1.0)
-        } else {
-            1.0
-        };
-        pb.set_position((frac * 1000.0) as u64);
-        pb.set_message(format!("solving, residual {:.1e}", p.residual));
-        tracing::debug!(
-            t,
-            iterations = p.iterations,
-            residual = p.residual,
-            "solver step"
-        );
-    })?;
-    pb.finish_and_clear();
-    if let Some(path) = &args.checkpoint {
-        result.write_checkpoint(path)?;
-    }
+    let clustered = use_clustered(args, &scene, &params)?;
+    let result = if clustered {
+        bake_clustered(&scene, &params, &args.hierarchy)?
+    } else {
+        bake_triangles(&scene, &params, args.checkpoint.as_deref())?
+    };
 
     let error = match &reference {
         Some((name, rows)) => Some((
@@ -419,4 +401,129 @@ pub fn run_default() -> anyhow::Result<()> {
         }
     );
     Ok(())
+}
+
+/// Whether this bake uses the clustered hierarchy (see `--hierarchy`).
+fn use_clustered(
+    args: &BakeArgs,
+    scene: &radiant::scene::Scene,
+    params: &radiant::radiosity::BakeParams,
+) -> anyhow::Result<bool> {
+    use radiant::radiosity::{FormFactorKind, SolverKind};
+    let needs_triangles = [
+        (args.spectral, "--spectral"),
+        (args.checkpoint.is_some(), "--checkpoint"),
+        (
+            !matches!(params.solver, SolverKind::GaussSeidel | SolverKind::Jacobi),
+            "--method southwell or direct",
+        ),
+        (
+            !matches!(
+                params.form_factors,
+                FormFactorKind::Analytic | FormFactorKind::RayCast
+            ),
+            "--form-factors hemicube or montecarlo",
+        ),
+    ];
+    let needed = needs_triangles
+        .iter()
+        .find(|(on, _)| *on)
+        .map(|(_, what)| *what);
+    match args.hierarchy.hierarchy.as_str() {
+        "triangles" => Ok(false),
+        "clustered" => match needed {
+            Some(what) => anyhow::bail!(
+                "{what} needs the per-triangle hierarchy: use --hierarchy triangles (or auto)"
+            ),
+            None => Ok(true),
+        },
+        _ => {
+            if needed.is_some() {
+                return Ok(false);
+            }
+            let big = scene.triangles.len() > 4096
+                || radiant::radiosity::Mesh::count_elements(scene, &params.mesh)? > 65_536;
+            Ok(big)
+        }
+    }
+}
+
+/// A bake with the clustered hierarchy, with progress on a terminal and in the log.
+fn bake_clustered(
+    scene: &radiant::scene::Scene,
+    params: &radiant::radiosity::BakeParams,
+    h: &crate::HierarchyArgs,
+) -> anyhow::Result<radiant::radiosity::BakeResult> {
+    use radiant::radiosity::cluster::{self, ClusterParams, Phase};
+    let cp = ClusterParams {
+        memory_limit: h.memory_limit,
+        samples: h.link_samples,
+        ..ClusterParams::default()
+    };
+    let pb = progress_bar(1, "links (clustered)");
+    let last_log = std::sync::Mutex::new(Instant::now());
+    let result = cluster::bake(scene, params, &cp, &|phase, done, total| {
+        match phase {
+            Phase::Links => {
+                pb.set_length(total as u64);
+                pb.set_position(done as u64);
+            }
+            Phase::Solve => {
+                pb.set_message(format!("solving, sweep {done}"));
+            }
+        }
+        // Also in the log, every few seconds, for runs without a terminal.
+        if let Ok(mut t) = last_log.lock()
+            && t.elapsed().as_secs_f64() >= 5.0
+        {
+            *t = Instant::now();
+            tracing::info!(?phase, done, total, "clustered bake progress");
+        }
+    })?;
+    pb.finish_and_clear();
+    if let Some(c) = &result.report.clusters {
+        println!(
+            "clustered hierarchy: {} elements, {} clusters, {} links ({:.1} per element), memory {} of {} MiB",
+            result.report.elements,
+            c.clusters,
+            result.report.links,
+            result.report.links as f64 / result.report.elements.max(1) as f64,
+            c.memory_estimate >> 20,
+            c.memory_limit >> 20
+        );
+    }
+    Ok(result)
+}
+
+/// A bake with the per-triangle hierarchy, resuming from and writing `checkpoint`.
+fn bake_triangles(
+    scene: &radiant::scene::Scene,
+    params: &radiant::radiosity::BakeParams,
+    checkpoint: Option<&Path>,
+) -> anyhow::Result<radiant::radiosity::BakeResult> {
+    let (bake, pb) = crate::start_bake(scene, params, checkpoint)?;
+    pb.set_length(1000);
+    pb.set_position(0);
+    let tol = params.solver_params.tolerance;
+    let result = bake.run_to_end(&mut |BakeEvent::Solve(p, t)| {
+        // Progress in log-residual, from 1 down to the tolerance.
+        let frac = if p.residual > 0.0 {
+            (p.residual.ln() / tol.ln()).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        pb.set_position((frac * 1000.0) as u64);
+        pb.set_message(format!("solving, residual {:.1e}", p.residual));
+        tracing::debug!(
+            t,
+            iterations = p.iterations,
+            residual = p.residual,
+            "solver step"
+        );
+    })?;
+    pb.finish_and_clear();
+    if let Some(path) = checkpoint {
+        result.write_checkpoint(path)?;
+    }
+    Ok(result)
 }

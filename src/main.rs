@@ -128,7 +128,55 @@ pub(crate) struct BakeArgs {
     #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(16..=16384))]
     pub(crate) lightmap_width: u32,
     #[command(flatten)]
+    pub(crate) hierarchy: HierarchyArgs,
+    #[command(flatten)]
     pub(crate) solve: SolveArgs,
+}
+
+/// Which link hierarchy bakes, and its memory budget.
+#[derive(Args, Debug, Clone)]
+pub(crate) struct HierarchyArgs {
+    /// Link hierarchy: `clustered` (volume clusters above triangles, links at any level on both
+    /// ends: for levels), `triangles` (every element gathers from a per-triangle hierarchy:
+    /// edits, checkpoints, spectral, every solver and form-factor method), or `auto`:
+    /// clustered when the scene has more than 4096 triangles or the per-triangle mesh would
+    /// have more than 65 536 elements, and no option needs the per-triangle bake.
+    #[arg(long, default_value = "auto", value_parser = ["auto", "clustered", "triangles"])]
+    pub(crate) hierarchy: String,
+    /// Memory budget of a clustered bake, e.g. 4G, 512M or bytes (default: 60 % of the
+    /// available memory). Over it the bake coarsens, and refuses with an error in the end.
+    #[arg(long, value_parser = parse_size)]
+    pub(crate) memory_limit: Option<u64>,
+    /// Visibility samples per link of a clustered bake.
+    #[arg(long, default_value_t = 4)]
+    pub(crate) link_samples: u32,
+}
+
+/// `4G`, `512M`, `64K` or a number of bytes.
+fn parse_size(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let (num, mul) = match t.char_indices().last() {
+        Some((i, c)) if c.is_ascii_alphabetic() => {
+            let mul: u64 = match c.to_ascii_uppercase() {
+                'K' => 1 << 10,
+                'M' => 1 << 20,
+                'G' => 1 << 30,
+                'T' => 1 << 40,
+                _ => return Err(format!("'{s}': use a number with K, M, G or T")),
+            };
+            (&t[..i], mul)
+        }
+        _ => (t, 1),
+    };
+    let v: f64 = num
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{s}' is not a size (e.g. 4G, 512M)"))?;
+    let bytes = v * mul as f64;
+    if !(bytes.is_finite() && bytes >= 1.0 && bytes < 1.8e19) {
+        return Err(format!("'{s}' is not a size between 1 byte and 16 EiB"));
+    }
+    Ok(bytes as u64)
 }
 
 /// `radiant converge`.

@@ -110,6 +110,8 @@ pub struct BakeReport {
     pub warnings: Vec<String>,
     /// Whether anything emits.
     pub has_emitters: bool,
+    /// The clustered hierarchy's figures, when it made the links ([`crate::cluster`]).
+    pub clusters: Option<crate::cluster::ClusterReport>,
 }
 
 /// Steps without progress after which [`Bake::run_to_end`] gives up.
@@ -141,8 +143,35 @@ pub struct BakeResult {
 }
 
 impl BakeResult {
+    /// A result made without per-triangle links (the clustered hierarchy): no checkpoint can
+    /// be written from it.
+    pub(crate) fn from_parts(
+        mesh: Mesh,
+        system: System,
+        radiosity: Vec<Rgb>,
+        surfaces: Vec<SurfaceMean>,
+        report: BakeReport,
+        dead: Vec<bool>,
+    ) -> BakeResult {
+        BakeResult {
+            mesh,
+            system,
+            radiosity,
+            surfaces,
+            report,
+            fingerprint: 0,
+            dead,
+            oracle: None,
+        }
+    }
+
     /// Writes the links and the solution to `path` (see [`Bake::write_checkpoint`]).
     pub fn write_checkpoint(&self, path: &std::path::Path) -> Result<(), BakeError> {
+        if self.report.clusters.is_some() {
+            return Err(BakeError::Checkpoint(
+                "bakes of the clustered hierarchy have no checkpoints yet: use --hierarchy triangles".into(),
+            ));
+        }
         crate::checkpoint::write(
             path,
             self.fingerprint,
@@ -190,7 +219,7 @@ pub struct Bake {
     last: Option<Progress>,
 }
 
-fn validate(scene: &Scene) -> Result<(), BakeError> {
+pub(crate) fn validate(scene: &Scene) -> Result<(), BakeError> {
     for s in &scene.surfaces {
         let bad = |what: String| BakeError::InvalidMaterial {
             surface: s.name.clone(),
@@ -849,6 +878,7 @@ impl Bake {
             timeline: self.timeline.clone(),
             warnings: self.warnings.clone(),
             has_emitters: self.has_emitters,
+            clusters: None,
         }
     }
 
@@ -873,7 +903,7 @@ impl Bake {
 /// Elements whose centroid lies inside closed geometry (the floor under a block): every one of
 /// the cosine-distributed probe rays from them hits a back face. Such elements receive nothing and no
 /// receiver sees them, so they must not dilute the radiosity of the source nodes they belong to.
-fn enclosed_elements(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<bool> {
+pub(crate) fn enclosed_elements(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<bool> {
     use rayon::prelude::*;
     const PROBES: u32 = 16;
     (0..mesh.element_count())
@@ -915,7 +945,12 @@ fn enclosed_elements(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<bool> 
 /// has the estimate `ρ` whatever the ambient level, so an edit that changes the ambient level
 /// (moving a block changes the total area in the last bits) leaves those estimates, and every
 /// refinement decision made with them, exactly as they were.
-fn estimates(mesh: &Mesh, rho: &[Rgb], source: &[Rgb], refinement: f64) -> (Vec<f64>, f64) {
+pub(crate) fn estimates(
+    mesh: &Mesh,
+    rho: &[Rgb],
+    source: &[Rgb],
+    refinement: f64,
+) -> (Vec<f64>, f64) {
     let max3 = |v: &Rgb| v[0].max(v[1]).max(v[2]);
     let (mut area, mut s_sum, mut r_sum) = (0.0, 0.0, 0.0);
     for (i, &id) in mesh.leaves.iter().enumerate() {

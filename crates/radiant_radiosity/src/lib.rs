@@ -22,6 +22,7 @@
 
 pub mod bake;
 pub mod checkpoint;
+pub mod cluster;
 pub mod form_factors;
 pub mod lightmap;
 pub mod lights;
@@ -85,6 +86,21 @@ pub enum BakeError {
     /// A reference file could not be used.
     #[error("reference: {0}")]
     Reference(String),
+    /// The bake would need more memory than its budget (`--memory-limit`), even at the
+    /// coarsest thresholds it may use. Nothing of that size was allocated.
+    #[error(
+        "{what} need {} MiB, over the memory limit of {} MiB: raise --memory-limit, or use a larger --patch-size or --refinement",
+        needed / (1 << 20),
+        limit / (1 << 20)
+    )]
+    OutOfMemory {
+        /// What would not fit.
+        what: &'static str,
+        /// Bytes it would need (at least).
+        needed: u64,
+        /// The budget in bytes (0: the allocator itself refused).
+        limit: u64,
+    },
     /// A checkpoint could not be written, read, or does not fit this scene.
     #[error("checkpoint: {0}")]
     Checkpoint(String),

@@ -191,6 +191,111 @@ impl Mesh {
         Ok(mesh)
     }
 
+    /// Elements [`Mesh::new`] would make, counted without meshing (saturating).
+    pub fn count_elements(scene: &Scene, params: &MeshParams) -> Result<u64, BakeError> {
+        let frame = frame_of(scene)?;
+        let patch = if params.patch_size > 0.0 && params.patch_size.is_finite() {
+            params.patch_size / frame.scale
+        } else {
+            0.25
+        };
+        let mut total = 0u64;
+        for t in &scene.triangles {
+            let v = t.vertices.map(|p| frame.to_local(p));
+            let longest = (v[1] - v[0])
+                .length()
+                .max((v[2] - v[1]).length())
+                .max((v[0] - v[2]).length());
+            let mut pd = 0u8;
+            while longest / f64::from(1u32 << pd) > patch && pd < 14 {
+                pd += 1;
+            }
+            let ld = pd.saturating_add(params.element_levels).min(15);
+            total = total.saturating_add(1u64 << (2 * u64::from(ld)));
+        }
+        Ok(total)
+    }
+
+    /// Meshes the scene to fit its geometry, for the clustered hierarchy
+    /// ([`crate::cluster`]): each input triangle is subdivided until its longest edge fits the
+    /// element size, `params.patch_size / 2^element_levels` (world units; patch size 0: a
+    /// quarter of the scene's extent), so a triangle already that small stays one element and a
+    /// large one gets as many as its size needs; no fixed count per triangle. The element
+    /// count is known before anything is allocated: `reserve(bytes)` is asked for the nodes'
+    /// memory first and may refuse it (the memory budget).
+    pub fn adaptive(
+        scene: &Scene,
+        params: &MeshParams,
+        reserve: &mut dyn FnMut(u64) -> Result<(), BakeError>,
+    ) -> Result<Mesh, BakeError> {
+        let frame = frame_of(scene)?;
+        let patch = if params.patch_size == 0.0 {
+            0.25
+        } else if params.patch_size > 0.0 && params.patch_size.is_finite() {
+            params.patch_size / frame.scale
+        } else {
+            return Err(BakeError::InvalidParameter(format!(
+                "patch size {} must be positive",
+                params.patch_size
+            )));
+        };
+        let element_size = patch / f64::from(1u32 << params.element_levels.min(16));
+        let mut plan = Vec::with_capacity(scene.triangles.len());
+        let (mut leaves, mut nodes) = (0u64, 0u64);
+        for t in &scene.triangles {
+            let v = t.vertices.map(|p| frame.to_local(p));
+            let longest = (v[1] - v[0])
+                .length()
+                .max((v[2] - v[1]).length())
+                .max((v[0] - v[2]).length());
+            let mut d = 0u8;
+            while longest / f64::from(1u32 << d) > element_size && d < 12 {
+                d += 1;
+            }
+            leaves += 1u64 << (2 * u64::from(d));
+            nodes += ((1u64 << (2 * u64::from(d) + 2)) - 1) / 3;
+            plan.push((v, d));
+        }
+        if nodes >= u64::from(u32::MAX) {
+            return Err(BakeError::OutOfMemory {
+                what: "mesh nodes",
+                needed: nodes.saturating_mul(std::mem::size_of::<Node>() as u64),
+                limit: u64::from(u32::MAX),
+            });
+        }
+        reserve(nodes * (std::mem::size_of::<Node>() as u64 + 4) + leaves * 4)?;
+        let mut mesh = Mesh {
+            frame,
+            nodes: Vec::new(),
+            roots: Vec::new(),
+            leaves: Vec::new(),
+            root_surface: scene.triangles.iter().map(|t| t.surface).collect(),
+            root_key: root_keys(scene),
+            patch_depth: plan.iter().map(|p| p.1).collect(),
+            patch_count: leaves as usize,
+        };
+        let oom = |what| BakeError::OutOfMemory {
+            what,
+            needed: nodes * std::mem::size_of::<Node>() as u64,
+            limit: 0,
+        };
+        mesh.nodes
+            .try_reserve_exact(nodes as usize)
+            .map_err(|_| oom("mesh nodes"))?;
+        mesh.leaves
+            .try_reserve_exact(leaves as usize)
+            .map_err(|_| oom("mesh leaves"))?;
+        mesh.roots
+            .try_reserve_exact(plan.len())
+            .map_err(|_| oom("mesh roots"))?;
+        for (r, (v, d)) in plan.into_iter().enumerate() {
+            let id = mesh.push(v, u32::MAX, r as u32, 0);
+            mesh.roots.push(id);
+            mesh.subdivide(id, d);
+        }
+        Ok(mesh)
+    }
+
     fn push(&mut self, v: [DVec3; 3], parent: u32, root: u32, depth: u8) -> u32 {
         let c = (v[1] - v[0]).cross(v[2] - v[0]);
         let len = c.length();

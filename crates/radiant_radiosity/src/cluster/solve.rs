@@ -1,0 +1,373 @@
+//! The solve over links at every level: one sweep pulls radiosity up (area-weighted means,
+//! elements inside closed geometry weighing 0), gathers `Σ F B̄_s` at every receiver node,
+//! pushes the gathered light down to the elements and sets `B = S + ρ G` there (Jacobi, as
+//! Hanrahan et al.'s "gather, push-pull"). All sums in `f64`.
+//!
+//! Clusters are directional on both ends ([`super::sh`]): a cluster source shines towards a
+//! receiver with the radiosity of its parts weighted by how much they face it (pulled up as
+//! harmonics of radiosity × normal); a cluster receiver gathers its light as harmonics of the
+//! incoming directions, and each triangle under it takes that light by its own normal. A closed
+//! box of one cluster thus lights its inner faces, not its outside.
+
+use rayon::prelude::*;
+
+use glam::DVec3;
+
+use super::refine::{KAPPA_MIN, Link};
+use super::sh;
+use super::tree::Tree;
+use crate::BakeError;
+use crate::mesh::Mesh;
+use crate::system::Rgb;
+
+/// Links in compressed rows by receiver node, with the tree's up and down passes.
+pub struct HierSystem {
+    /// Number of mesh nodes (ids below are mesh nodes, the rest clusters).
+    mesh_nodes: u32,
+    /// Row `n` is `src[row[n]..row[n + 1]]`, over every node id.
+    row: Vec<u64>,
+    /// Source node of each link.
+    src: Vec<u32>,
+    /// Form factor of each link.
+    ff: Vec<f32>,
+    /// Parent of every node (`u32::MAX` for the root).
+    parent: Vec<u32>,
+    /// Weight of every node: the area of its elements outside closed geometry.
+    weight: Vec<f64>,
+    /// Children of every cluster.
+    cluster_children: Vec<[u32; 2]>,
+    /// Mesh: first child of each node (`u32::MAX` for elements).
+    first_child: Vec<u32>,
+    /// Mesh: element → node.
+    leaf_node: Vec<u32>,
+    /// Mesh: node → its element, for leaves.
+    node_leaf: Vec<u32>,
+    /// Element areas.
+    pub area: Vec<f64>,
+    /// Element reflectance.
+    pub rho: Vec<Rgb>,
+    /// Element source term (emission plus direct light).
+    pub source: Vec<Rgb>,
+    /// Elements inside closed geometry.
+    dead: Vec<bool>,
+    /// Centre of every node (directions between clusters).
+    center: Vec<DVec3>,
+    /// Mesh: unit normal of every node.
+    normal: Vec<DVec3>,
+    /// Per cluster: harmonics of its normals.
+    normal_sh: Vec<[f64; 9]>,
+}
+
+/// Per channel, nine harmonics coefficients.
+type Sh3 = [[f64; 9]; 3];
+
+/// Bytes a link costs while links are built and then held (the parts, then the rows).
+pub const LINK_BYTES: u64 = (std::mem::size_of::<Link>() + 4 + 4) as u64;
+
+impl HierSystem {
+    /// Assembles the rows from the refinement's parts (consumed one by one).
+    pub fn new(
+        mesh: &Mesh,
+        tree: &Tree,
+        parts: Vec<Vec<Link>>,
+        rho: Vec<Rgb>,
+        source: Vec<Rgb>,
+        dead: Vec<bool>,
+    ) -> Result<HierSystem, BakeError> {
+        let nodes = tree.len();
+        let total: usize = parts.iter().map(Vec::len).sum();
+        let oom = |what| BakeError::OutOfMemory {
+            what,
+            needed: total as u64 * 8,
+            limit: 0,
+        };
+        let mut row = vec![0u64; nodes + 1];
+        for p in &parts {
+            for l in p {
+                row[l.recv as usize + 1] += 1;
+            }
+        }
+        for i in 0..nodes {
+            row[i + 1] += row[i];
+        }
+        let mut src: Vec<u32> = Vec::new();
+        src.try_reserve_exact(total).map_err(|_| oom("links"))?;
+        src.resize(total, 0);
+        let mut ff: Vec<f32> = Vec::new();
+        ff.try_reserve_exact(total).map_err(|_| oom("links"))?;
+        ff.resize(total, 0.0);
+        let mut fill = row.clone();
+        for p in parts {
+            for l in p {
+                let k = fill[l.recv as usize] as usize;
+                fill[l.recv as usize] += 1;
+                src[k] = l.src;
+                ff[k] = l.ff;
+            }
+        }
+        drop(fill);
+        let area: Vec<f64> = mesh
+            .leaves
+            .iter()
+            .map(|&n| mesh.nodes[n as usize].area)
+            .collect();
+        let mut node_leaf = vec![u32::MAX; mesh.nodes.len()];
+        for (i, &n) in mesh.leaves.iter().enumerate() {
+            node_leaf[n as usize] = i as u32;
+        }
+        let mut sys = HierSystem {
+            mesh_nodes: tree.mesh_nodes,
+            row,
+            src,
+            ff,
+            parent: tree.parent.clone(),
+            weight: vec![0.0; nodes],
+            cluster_children: tree.clusters.iter().map(|c| c.children).collect(),
+            first_child: mesh.nodes.iter().map(|n| n.first_child).collect(),
+            leaf_node: mesh.leaves.clone(),
+            node_leaf,
+            area,
+            rho,
+            source,
+            dead,
+            center: tree.center.clone(),
+            normal: mesh.nodes.iter().map(|n| n.normal).collect(),
+            normal_sh: tree.normal_sh.clone(),
+        };
+        let mut w = vec![0.0; nodes];
+        for (i, &n) in sys.leaf_node.iter().enumerate() {
+            w[n as usize] = if sys.dead[i] { 0.0 } else { sys.area[i] };
+        }
+        // Children after parents: one backward pass.
+        for n in (0..nodes).rev() {
+            if let Some(c) = sys.cluster(n) {
+                w[n] = w[c[0] as usize] + w[c[1] as usize];
+            } else if sys.first_child[n] != u32::MAX {
+                let f = sys.first_child[n] as usize;
+                w[n] = w[f] + w[f + 1] + w[f + 2] + w[f + 3];
+            }
+        }
+        sys.weight = w;
+        Ok(sys)
+    }
+
+    fn cluster(&self, n: usize) -> Option<[u32; 2]> {
+        n.checked_sub(self.mesh_nodes as usize)
+            .map(|c| self.cluster_children[c])
+    }
+
+    /// Number of links.
+    pub fn links(&self) -> usize {
+        self.src.len()
+    }
+
+    /// Links whose receiver is a cluster, and whose source is.
+    pub fn cluster_links(&self) -> (usize, usize) {
+        let m = self.mesh_nodes as usize;
+        let recv = (self.row[self.row.len() - 1] - self.row[m]) as usize;
+        let src = self.src.iter().filter(|&&s| s >= self.mesh_nodes).count();
+        (recv, src)
+    }
+
+    /// Bytes held by the links.
+    pub fn link_bytes(&self) -> usize {
+        self.src.len() * 8 + self.row.len() * 8
+    }
+
+    /// Sum of the form factors of node `n`'s row and of its ancestors' rows: the fraction of
+    /// the hemisphere an element under `n` gathers from (1 in a closed scene).
+    pub fn row_sum_to_root(&self, n: u32) -> f64 {
+        let mut sum = 0.0;
+        let mut n = n;
+        while n != u32::MAX {
+            let (lo, hi) = (
+                self.row[n as usize] as usize,
+                self.row[n as usize + 1] as usize,
+            );
+            sum += self.ff[lo..hi].iter().map(|&f| f64::from(f)).sum::<f64>();
+            n = self.parent[n as usize];
+        }
+        sum
+    }
+
+    /// The node of element `i`.
+    pub fn leaf_node(&self, i: usize) -> u32 {
+        self.leaf_node[i]
+    }
+
+    /// Area-weighted means of `b` at every node.
+    fn pull(&self, b: &[Rgb], nodes: &mut [Rgb]) {
+        for n in (0..nodes.len()).rev() {
+            let w = self.weight[n];
+            nodes[n] = if w <= 0.0 {
+                [0.0; 3]
+            } else if let Some(c) = self.cluster(n) {
+                let (a, b2) = (c[0] as usize, c[1] as usize);
+                let (wa, wb) = (self.weight[a], self.weight[b2]);
+                std::array::from_fn(|k| (wa * nodes[a][k] + wb * nodes[b2][k]) / w)
+            } else if self.first_child[n] != u32::MAX {
+                let f = self.first_child[n] as usize;
+                let mut acc = [0.0; 3];
+                for c in f..f + 4 {
+                    for k in 0..3 {
+                        acc[k] += self.weight[c] * nodes[c][k];
+                    }
+                }
+                acc.map(|v| v / w)
+            } else {
+                b[self.node_leaf[n] as usize]
+            };
+        }
+    }
+
+    /// Per cluster: weighted means of radiosity × the harmonics of the normal.
+    fn pull_directional(&self, nb: &[Rgb]) -> Vec<Sh3> {
+        let m = self.mesh_nodes as usize;
+        let mut p = vec![[[0.0; 9]; 3]; self.cluster_children.len()];
+        for c in (0..p.len()).rev() {
+            let w = self.weight[m + c];
+            if w <= 0.0 {
+                continue;
+            }
+            let mut acc = [[0.0; 9]; 3];
+            for ch in self.cluster_children[c] {
+                let (ch, wc) = (ch as usize, self.weight[ch as usize]);
+                if wc <= 0.0 {
+                    continue;
+                }
+                if ch >= m {
+                    for k in 0..3 {
+                        for j in 0..9 {
+                            acc[k][j] += wc * p[ch - m][k][j];
+                        }
+                    }
+                } else {
+                    let y = sh::basis(self.normal[ch]);
+                    for k in 0..3 {
+                        for j in 0..9 {
+                            acc[k][j] += wc * nb[ch][k] * y[j];
+                        }
+                    }
+                }
+            }
+            p[c] = acc.map(|a| a.map(|v| v / w));
+        }
+        p
+    }
+
+    /// What source `s` sends towards receiver `r`: its mean, or for a cluster the mean of its
+    /// parts weighted by how much they face `r`.
+    #[inline]
+    fn value(&self, r: usize, s: usize, nb: &[Rgb], p: &[Sh3]) -> Rgb {
+        let m = self.mesh_nodes as usize;
+        if s < m {
+            return nb[s];
+        }
+        let d = (self.center[r] - self.center[s]).normalize_or_zero();
+        let cy = sh::cosine(d);
+        let den = sh::dot(&self.normal_sh[s - m], &cy).max(KAPPA_MIN);
+        let ps = &p[s - m];
+        std::array::from_fn(|k| (sh::dot(&ps[k], &cy) / den).max(0.0))
+    }
+
+    /// One Jacobi sweep from `b`; returns the new radiosity.
+    pub fn sweep(&self, b: &[Rgb]) -> Vec<Rgb> {
+        let nodes = self.row.len() - 1;
+        let m = self.mesh_nodes as usize;
+        let mut nb = vec![[0.0; 3]; nodes];
+        self.pull(b, &mut nb);
+        let p = self.pull_directional(&nb);
+        let mut g: Vec<Rgb> = (0..m)
+            .into_par_iter()
+            .with_min_len(1024)
+            .map(|n| {
+                let (lo, hi) = (self.row[n] as usize, self.row[n + 1] as usize);
+                let mut acc = [0.0; 3];
+                for k in lo..hi {
+                    let f = f64::from(self.ff[k]);
+                    let v = self.value(n, self.src[k] as usize, &nb, &p);
+                    acc[0] += f * v[0];
+                    acc[1] += f * v[1];
+                    acc[2] += f * v[2];
+                }
+                acc
+            })
+            .collect();
+        // Cluster receivers gather by direction.
+        let mut shr: Vec<Sh3> = (m..nodes)
+            .into_par_iter()
+            .with_min_len(256)
+            .map(|n| {
+                let (lo, hi) = (self.row[n] as usize, self.row[n + 1] as usize);
+                let mut acc = [[0.0; 9]; 3];
+                for k in lo..hi {
+                    let s = self.src[k] as usize;
+                    let f = f64::from(self.ff[k]);
+                    let v = self.value(n, s, &nb, &p);
+                    let y = sh::basis((self.center[s] - self.center[n]).normalize_or_zero());
+                    for c in 0..3 {
+                        let fv = f * v[c];
+                        for j in 0..9 {
+                            acc[c][j] += fv * y[j];
+                        }
+                    }
+                }
+                acc
+            })
+            .collect();
+        drop(nb);
+        drop(p);
+        // Push down: clusters (preorder) first, then mesh nodes (parents before children); a
+        // triangle under a cluster takes the cluster's light by its normal.
+        for c in 0..shr.len() {
+            let parent = self.parent[m + c];
+            if parent != u32::MAX {
+                let up = shr[parent as usize - m];
+                for k in 0..3 {
+                    for j in 0..9 {
+                        shr[c][k][j] += up[k][j];
+                    }
+                }
+            }
+        }
+        for n in 0..m {
+            let parent = self.parent[n];
+            if parent == u32::MAX {
+                continue;
+            }
+            let up = if parent as usize >= m {
+                let cy = sh::cosine(self.normal[n]);
+                let s = &shr[parent as usize - m];
+                std::array::from_fn(|k| sh::dot(&s[k], &cy).max(0.0))
+            } else {
+                g[parent as usize]
+            };
+            for k in 0..3 {
+                g[n][k] += up[k];
+            }
+        }
+        (0..b.len())
+            .map(|i| {
+                if self.dead[i] {
+                    return [0.0; 3];
+                }
+                let gi = g[self.leaf_node[i] as usize];
+                std::array::from_fn(|k| self.source[i][k] + self.rho[i][k] * gi[k])
+            })
+            .collect()
+    }
+
+    /// Area-weighted L2 norm over all channels.
+    pub fn norm(&self, v: &[Rgb]) -> f64 {
+        v.iter()
+            .zip(&self.area)
+            .map(|(x, a)| a * (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]))
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    /// Consumes the system, handing back reflectance, sources and the closed-geometry flags.
+    pub fn into_parts(self) -> (Vec<Rgb>, Vec<Rgb>, Vec<bool>) {
+        (self.rho, self.source, self.dead)
+    }
+}
