@@ -173,7 +173,7 @@ fn parse_size(s: &str) -> Result<u64, String> {
         .parse()
         .map_err(|_| format!("'{s}' is not a size (e.g. 4G, 512M)"))?;
     let bytes = v * mul as f64;
-    if !(bytes.is_finite() && bytes >= 1.0 && bytes < 1.8e19) {
+    if !(1.0..1.8e19).contains(&bytes) {
         return Err(format!("'{s}' is not a size between 1 byte and 16 EiB"));
     }
     Ok(bytes as u64)

@@ -152,6 +152,21 @@ pub fn report_json(
     if let Some((name, e)) = reference {
         v["reference"] = json!({ "source": name, "error": error_json(e) });
     }
+    v["hierarchy"] = match &r.clusters {
+        Some(c) => json!({
+            "kind": "clustered",
+            "clusters": c.clusters,
+            "cluster_receiver_links": c.cluster_receiver_links,
+            "cluster_source_links": c.cluster_source_links,
+            "links_per_element": r.links as f64 / r.elements.max(1) as f64,
+            "refinement_asked": c.refinement_asked,
+            "refinement_used": c.refinement_used,
+            "memory_limit_bytes": c.memory_limit,
+            "memory_counted_bytes": c.memory_estimate,
+            "enclosed_elements": c.enclosed,
+        }),
+        None => json!({ "kind": "triangles" }),
+    };
     v
 }
 

@@ -345,3 +345,77 @@ fn a_checkpoint_lets_the_next_bake_skip_form_factors() {
     let _ = std::fs::remove_dir_all(&out);
     let _ = std::fs::remove_file(&ckpt);
 }
+
+#[test]
+fn clustered_bake_reports_its_hierarchy_and_memory_limit_refuses() {
+    let out = tmp("clustered");
+    let st = radiant()
+        .args([
+            "bake",
+            "--builtin",
+            "cornell-box",
+            "--hierarchy",
+            "clustered",
+            "--patch-size",
+            "0.3",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(
+        st.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&st.stdout);
+    assert!(stdout.contains("clustered hierarchy:"), "{stdout}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report"))
+            .expect("json");
+    assert_eq!(report["hierarchy"]["kind"], "clustered");
+    assert!(
+        report["hierarchy"]["memory_counted_bytes"]
+            .as_u64()
+            .unwrap_or(0)
+            > 0
+    );
+    assert!(out.join("surfaces.csv").is_file());
+
+    // A budget far below the mesh: one line naming the limit, a non-zero exit, in no time.
+    let st = radiant()
+        .args([
+            "bake",
+            "--builtin",
+            "cornell-box",
+            "--hierarchy",
+            "clustered",
+            "--patch-size",
+            "0.002",
+            "--memory-limit",
+            "8M",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(!st.status.success());
+    let stderr = String::from_utf8_lossy(&st.stderr);
+    assert!(stderr.contains("memory limit of 8 MiB"), "{stderr}");
+    // Options the clustered bake does not have are refused, not ignored.
+    let st = radiant()
+        .args([
+            "bake",
+            "--builtin",
+            "cornell-box",
+            "--hierarchy",
+            "clustered",
+            "--spectral",
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(!st.status.success());
+    assert!(String::from_utf8_lossy(&st.stderr).contains("--hierarchy triangles"));
+}

@@ -932,6 +932,9 @@ pub(crate) fn enclosed_elements(mesh: &Mesh, vis: &dyn Visibility, seed: u64) ->
                     .is_some_and(|h| !h.front)
                 {
                     back += 1;
+                } else {
+                    // One probe that escapes or meets a front face decides it: not enclosed.
+                    break;
                 }
             }
             back == PROBES

@@ -90,3 +90,72 @@ pub fn furnace(rho: f64, e: f64) -> Scene {
     );
     s
 }
+
+/// `scene` with every triangle split into `4^levels` (midpoint subdivision): the same surfaces
+/// as many small input triangles, as a modelling tool's fine tessellation gives them.
+pub fn tessellated(scene: &Scene, levels: u32) -> Scene {
+    let mut s = scene.clone();
+    for _ in 0..levels {
+        s.triangles = s
+            .triangles
+            .iter()
+            .flat_map(|t| {
+                let [a, b, c] = t.vertices;
+                let (ab, bc, ca) = ((a + b) * 0.5, (b + c) * 0.5, (c + a) * 0.5);
+                [[a, ab, ca], [ab, b, bc], [ca, bc, c], [bc, ca, ab]].map(|vertices| Triangle {
+                    vertices,
+                    surface: t.surface,
+                })
+            })
+            .collect();
+    }
+    s
+}
+
+/// A room for scaling runs: a closed 20 × 4 × 20 box (reflectance 0.6) with an emitting
+/// ceiling panel and a `k × k` grid of boxes on the floor (reflectance 0.5), each box's
+/// faces split into `4^split` triangles. Input triangles: `12 + 2 + 12 k² 4^split`.
+pub fn room_with_boxes(k: u32, split: u32) -> Scene {
+    let mut s = Scene::default();
+    let (w, h) = (20.0, 4.0);
+    add_surface(
+        &mut s,
+        "room",
+        [0.6; 3],
+        [0.0; 3],
+        &box_triangles(DVec3::ZERO, DVec3::new(w, h, w), true),
+    );
+    let panel = quad(
+        DVec3::new(w * 0.4, h - 1e-3, w * 0.4),
+        DVec3::new(w * 0.2, 0.0, 0.0),
+        DVec3::new(0.0, 0.0, w * 0.2),
+    );
+    add_surface(&mut s, "light", [0.0; 3], [5.0; 3], &panel);
+    let mut boxes = Scene::default();
+    let cell = w / f64::from(k.max(1));
+    for i in 0..k {
+        for j in 0..k {
+            let lo = DVec3::new(
+                (f64::from(i) + 0.25) * cell,
+                0.0,
+                (f64::from(j) + 0.25) * cell,
+            );
+            let size = DVec3::new(cell * 0.5, (cell * 0.5).min(h * 0.5), cell * 0.5);
+            add_surface(
+                &mut boxes,
+                &format!("box_{i}_{j}"),
+                [0.5; 3],
+                [0.0; 3],
+                &box_triangles(lo, lo + size, false),
+            );
+        }
+    }
+    let boxes = tessellated(&boxes, split);
+    let base = s.surfaces.len() as u32;
+    s.surfaces.extend(boxes.surfaces);
+    s.triangles.extend(boxes.triangles.into_iter().map(|mut t| {
+        t.surface += base;
+        t
+    }));
+    s
+}

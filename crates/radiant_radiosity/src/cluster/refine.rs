@@ -315,6 +315,9 @@ impl Refiner<'_> {
         if r < m && s < m {
             return self.planar(r, s, n, &mut rng);
         }
+        // A cluster link's estimate is its form factor too, not only its visibility: never
+        // fewer than half the full count.
+        let n = n.max(self.samples.div_ceil(2));
         let a_s = self.tree.area[s as usize];
         let da = a_s / f64::from(n);
         let mut sum = 0.0;

@@ -138,8 +138,10 @@ impl HierSystem {
         for (i, &n) in sys.leaf_node.iter().enumerate() {
             w[n as usize] = if sys.dead[i] { 0.0 } else { sys.area[i] };
         }
-        // Children after parents: one backward pass.
-        for n in (0..nodes).rev() {
+        // Children after parents among mesh nodes and among clusters, and every cluster above
+        // the mesh roots: mesh nodes backwards, then clusters backwards.
+        let m = tree.mesh_nodes as usize;
+        for n in (0..m).rev().chain((m..nodes).rev()) {
             if let Some(c) = sys.cluster(n) {
                 w[n] = w[c[0] as usize] + w[c[1] as usize];
             } else if sys.first_child[n] != u32::MAX {
@@ -197,7 +199,8 @@ impl HierSystem {
 
     /// Area-weighted means of `b` at every node.
     fn pull(&self, b: &[Rgb], nodes: &mut [Rgb]) {
-        for n in (0..nodes.len()).rev() {
+        let m = self.mesh_nodes as usize;
+        for n in (0..m).rev().chain((m..nodes.len()).rev()) {
             let w = self.weight[n];
             nodes[n] = if w <= 0.0 {
                 [0.0; 3]

@@ -1,0 +1,276 @@
+//! The clustered hierarchy (`radiosity::cluster`): the Cornell box against Mitsuba, a finely
+//! tessellated box against the plain one, links per element across a sequence of rooms, the
+//! furnace and the row sums with clusters, thread-count determinism, and the memory budget.
+
+mod common;
+
+use radiant_radiosity::cluster::{self, ClusterParams, ClusterReport};
+use radiant_radiosity::metrics::{CORNELL_BOX_REFERENCE, compare_surfaces, parse_reference_csv};
+use radiant_radiosity::scenes::{furnace, room_with_boxes, tessellated};
+use radiant_radiosity::{BakeError, BakeParams, BakeResult, FormFactorKind};
+use radiant_scene::Scene;
+
+fn bake(scene: &Scene, params: &BakeParams, cp: &ClusterParams) -> BakeResult {
+    cluster::bake(scene, params, cp, &|_, _, _| {}).expect("clustered bake")
+}
+
+fn report(r: &BakeResult) -> &ClusterReport {
+    r.report.clusters.as_ref().expect("a clustered report")
+}
+
+/// The threshold the accuracy tests hold the clustered bake to.
+fn accurate() -> BakeParams {
+    let mut p = BakeParams::default();
+    p.links.refinement = 0.004;
+    p
+}
+
+#[test]
+fn cornell_box_matches_mitsuba() {
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    let reference = parse_reference_csv(CORNELL_BOX_REFERENCE).expect("reference parses");
+    let r = bake(&scene, &accurate(), &ClusterParams::default());
+    assert!(r.report.converged);
+    let e = compare_surfaces(&r.surfaces, &reference).expect("compare");
+    eprintln!(
+        "clustered Cornell box vs Mitsuba: mean {:.3} %, max {:.3} %, {} links",
+        e.mean_rel * 100.0,
+        e.max_rel * 100.0,
+        r.report.links
+    );
+    assert!(e.mean_rel <= 0.01, "mean {:.3} %", e.mean_rel * 100.0);
+    assert!(e.max_rel <= 0.03, "max {:.3} %", e.max_rel * 100.0);
+}
+
+#[test]
+fn a_finely_tessellated_box_bakes_like_the_plain_one() {
+    // Every quad of the box split into 512 triangles (4^4 per triangle): 9 728 input
+    // triangles, most smaller than an element, which stay whole.
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    let fine = tessellated(&scene, 4);
+    assert_eq!(fine.triangles.len(), scene.triangles.len() * 256);
+    let mut p = accurate();
+    p.links.refinement = 0.002;
+    let cp = ClusterParams::default();
+    let (a, b) = (bake(&scene, &p, &cp), bake(&fine, &p, &cp));
+    let (mut worst, mut mean, mut area) = (0.0f64, 0.0, 0.0);
+    for (x, y) in a.surfaces.iter().zip(&b.surfaces) {
+        assert_eq!(x.name, y.name);
+        if x.emitter {
+            continue;
+        }
+        let d = (0..3)
+            .map(|c| (y.mean[c] - x.mean[c]).abs() / x.mean[c])
+            .fold(0.0, f64::max);
+        worst = worst.max(d);
+        mean += x.area * d;
+        area += x.area;
+    }
+    mean /= area;
+    let lpe = |r: &BakeResult| r.report.links as f64 / r.report.elements as f64;
+    eprintln!(
+        "tessellated vs plain: mean {:.3} %, max {:.3} %; links per element {:.1} vs {:.1}; elements {} vs {}",
+        mean * 100.0,
+        worst * 100.0,
+        lpe(&b),
+        lpe(&a),
+        b.report.elements,
+        a.report.elements
+    );
+    assert!(mean <= 0.005, "mean difference {:.3} %", mean * 100.0);
+    assert!(worst <= 0.03, "largest difference {:.3} %", worst * 100.0);
+    assert!(
+        lpe(&b) <= 2.0 * lpe(&a),
+        "links per element {:.1} against {:.1}",
+        lpe(&b),
+        lpe(&a)
+    );
+}
+
+#[test]
+fn links_grow_linearly_across_rooms() {
+    // Rooms of 2², 4², 8² and 16² boxes: 5 k to 100 k input triangles. Links per element stay
+    // within a band (the N^1.5 growth of the per-triangle hierarchy would double them from one
+    // room to the next).
+    let mut p = BakeParams::default();
+    p.mesh.patch_size = 2.0;
+    p.mesh.element_levels = 0;
+    let cp = ClusterParams::default();
+    let mut per_element = Vec::new();
+    for (k, split) in [(4u32, 2u32), (8, 2), (16, 2)] {
+        let scene = room_with_boxes(k, split);
+        let r = bake(&scene, &p, &cp);
+        let lpe = r.report.links as f64 / r.report.elements as f64;
+        eprintln!(
+            "room {k}x{k}: {} triangles, {} elements, {} links, {lpe:.1} per element, {} MiB counted",
+            scene.triangles.len(),
+            r.report.elements,
+            r.report.links,
+            report(&r).memory_estimate >> 20
+        );
+        per_element.push((r.report.elements, lpe, report(&r).memory_estimate));
+    }
+    let (lo, hi) = per_element
+        .iter()
+        .fold((f64::MAX, 0.0f64), |(lo, hi), &(_, l, _)| {
+            (lo.min(l), hi.max(l))
+        });
+    // Flat or falling: no room has more than 1.5 times the first room's links per element.
+    let first = per_element[0].1;
+    assert!(
+        hi <= 1.5 * first,
+        "links per element from {lo:.1} to {hi:.1}, first {first:.1}"
+    );
+    // Memory per element stays within the same band.
+    let mpe: Vec<f64> = per_element
+        .iter()
+        .map(|&(n, _, m)| m as f64 / n as f64)
+        .collect();
+    let mhi = mpe.iter().fold(0.0f64, |hi, &m| hi.max(m));
+    assert!(
+        mhi <= 1.5 * mpe[0],
+        "bytes per element up to {mhi:.0}, first {:.0}",
+        mpe[0]
+    );
+}
+
+#[test]
+fn the_furnace_holds_with_clusters() {
+    // A closed cube of many small triangles (clusters carry most of the transport): B = E/(1−ρ).
+    for rho in [0.5, 0.9] {
+        let scene = tessellated(&furnace(rho, 1.0), 3);
+        let mut p = BakeParams::default();
+        p.solver_params.tolerance = 1e-7;
+        let r = bake(&scene, &p, &ClusterParams::default());
+        let exact = 1.0 / (1.0 - rho);
+        let got = r.surfaces[0].mean[0];
+        let worst = r
+            .radiosity
+            .iter()
+            .map(|b| (b[0] - exact).abs() / exact)
+            .fold(0.0, f64::max);
+        let rms = (r
+            .radiosity
+            .iter()
+            .zip(&r.system.area)
+            .map(|(b, a)| a * ((b[0] - exact) / exact).powi(2))
+            .sum::<f64>()
+            / r.system.area.iter().sum::<f64>())
+        .sqrt();
+        eprintln!(
+            "furnace rho {rho}: mean {got:.5} (exact {exact:.5}), rms {:.2} %, worst element {:.2} %, {} cluster-receiver links of {}",
+            rms * 100.0,
+            worst * 100.0,
+            report(&r).cluster_receiver_links,
+            r.report.links
+        );
+        assert!(report(&r).cluster_receiver_links > 0);
+        assert!(
+            (got - exact).abs() / exact <= 0.005,
+            "mean {got} vs {exact}"
+        );
+        assert!(rms <= 0.05, "rms {:.2} %", rms * 100.0);
+    }
+}
+
+#[test]
+fn one_and_two_threads_give_the_same_light() {
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    let mut p = BakeParams::default();
+    p.mesh.patch_size = 0.2;
+    let run = |threads| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool")
+            .install(|| bake(&scene, &p, &ClusterParams::default()))
+    };
+    let (a, b) = (run(1), run(2));
+    assert_eq!(a.report.links, b.report.links);
+    assert_eq!(a.radiosity, b.radiosity);
+}
+
+#[test]
+fn a_tiny_memory_limit_is_a_typed_error_without_allocating() {
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    let mut p = BakeParams::default();
+    // 4^8 elements per triangle would be 2.5 M elements and about 0.5 GB of mesh.
+    p.mesh.patch_size = 0.002;
+    let cp = ClusterParams {
+        memory_limit: Some(16 << 20),
+        ..ClusterParams::default()
+    };
+    match cluster::bake(&scene, &p, &cp, &|_, _, _| {}) {
+        Err(BakeError::OutOfMemory {
+            what,
+            needed,
+            limit,
+        }) => {
+            eprintln!("{what}: {needed} of {limit}");
+            assert_eq!(what, "the mesh");
+            assert!(needed > limit && limit == 16 << 20);
+        }
+        other => panic!("expected OutOfMemory, got {:?}", other.err()),
+    }
+}
+
+#[test]
+fn links_over_the_budget_coarsen_or_refuse() {
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    let p = accurate();
+    let full = bake(&scene, &p, &ClusterParams::default());
+    // Enough for the mesh and buffers, and a quarter of the links.
+    let limit = report(&full).memory_estimate - (full.report.links as u64 * 3 / 4) * 20;
+    let cp = ClusterParams {
+        memory_limit: Some(limit),
+        ..ClusterParams::default()
+    };
+    let coarse = bake(&scene, &p, &cp);
+    let c = report(&coarse);
+    assert!(c.refinement_used > c.refinement_asked);
+    assert!(c.memory_estimate <= limit);
+    assert!(coarse.report.links < full.report.links);
+    assert!(coarse.report.warnings.iter().any(|w| w.contains("coarser")));
+    let strict = ClusterParams {
+        coarsen: false,
+        ..cp
+    };
+    assert!(matches!(
+        cluster::bake(&scene, &p, &strict, &|_, _, _| {}),
+        Err(BakeError::OutOfMemory {
+            what: "the links",
+            ..
+        })
+    ));
+}
+
+#[test]
+fn bad_parameters_and_no_emitters() {
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    let cp = ClusterParams::default();
+    for kind in [FormFactorKind::Hemicube, FormFactorKind::MonteCarlo] {
+        let p = BakeParams {
+            form_factors: kind,
+            ..BakeParams::default()
+        };
+        assert!(matches!(
+            cluster::bake(&scene, &p, &cp, &|_, _, _| {}),
+            Err(BakeError::InvalidParameter(_))
+        ));
+    }
+    let mut p = BakeParams::default();
+    p.links.refinement = f64::NAN;
+    assert!(matches!(
+        cluster::bake(&scene, &p, &cp, &|_, _, _| {}),
+        Err(BakeError::InvalidParameter(_))
+    ));
+    // Nothing emits: zeros, no links, a warning.
+    let mut dark = scene.clone();
+    for s in &mut dark.surfaces {
+        s.emission = [0.0; 3];
+    }
+    let r = bake(&dark, &BakeParams::default(), &cp);
+    assert_eq!(r.report.links, 0);
+    assert!(r.radiosity.iter().all(|b| *b == [0.0; 3]));
+    assert!(!r.report.has_emitters);
+}
