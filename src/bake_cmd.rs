@@ -404,6 +404,16 @@ pub fn run_default() -> anyhow::Result<()> {
 }
 
 /// Whether this bake uses the clustered hierarchy (see `--hierarchy`).
+/// `--hierarchy auto`'s size rule: a scene with more than 4096 triangles, or whose
+/// per-triangle mesh would have more than 65 536 elements, bakes clustered.
+pub(crate) fn is_level(
+    scene: &radiant::scene::Scene,
+    params: &radiant::radiosity::BakeParams,
+) -> anyhow::Result<bool> {
+    Ok(scene.triangles.len() > 4096
+        || radiant::radiosity::Mesh::count_elements(scene, &params.mesh)? > 65_536)
+}
+
 fn use_clustered(
     args: &BakeArgs,
     scene: &radiant::scene::Scene,
@@ -441,9 +451,7 @@ fn use_clustered(
             if needed.is_some() {
                 return Ok(false);
             }
-            let big = scene.triangles.len() > 4096
-                || radiant::radiosity::Mesh::count_elements(scene, &params.mesh)? > 65_536;
-            Ok(big)
+            is_level(scene, params)
         }
     }
 }

@@ -5,9 +5,9 @@ use std::time::{Duration, Instant};
 
 use radiant::radiosity::metrics::{self, ErrorStats};
 use radiant::radiosity::solvers::{Direct, Solver};
-use radiant::radiosity::{Bake, BakeError, Rgb};
+use radiant::radiosity::{Bake, BakeError, FormFactorKind, Rgb, SolverKind};
 
-use crate::bake_cmd::{progress_bar, reference_for};
+use crate::bake_cmd::{NamedReference, progress_bar, reference_for};
 use crate::output::{ensure_dir, write_atomic};
 use crate::plot::{Curve, plot_convergence};
 use crate::{ConvergeArgs, load_scene, parse_ff, parse_solver};
@@ -37,19 +37,33 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
         args.sample_every > 0.0 && args.sample_every.is_finite(),
         "--sample-every must be positive"
     );
-    let file_ref = match args.reference.as_deref() {
-        Some("direct") => None,
-        other => reference_for(&args.scene, other.map(std::path::Path::new))?,
+    let clustered = match args.hierarchy.as_str() {
+        "clustered" => true,
+        "triangles" => false,
+        _ => crate::bake_cmd::is_level(
+            &scene,
+            &args
+                .solve
+                .params(SolverKind::Jacobi, FormFactorKind::Analytic)?,
+        )?,
     };
-    // With no reference file (a scene of the user's without --reference), the direct solve on
-    // the same mesh is the reference.
+    ensure_dir(&args.out)?;
+    let file_ref = choose_reference(args, &scene)?;
+    // With `--reference direct`, the direct solve on the same mesh is the reference.
     let use_direct = file_ref.is_none();
     let reference_name = file_ref.as_ref().map_or(
         "direct solve on the same mesh (solver error)".to_string(),
         |(n, _)| n.clone(),
     );
     let time_limit = args.solve.time_limit.unwrap_or(10.0);
-    ensure_dir(&args.out)?;
+    if clustered {
+        let Some((_, rows)) = &file_ref else {
+            anyhow::bail!(
+                "a clustered bake has no direct solve to compare with: use --reference path (or a CSV), or --hierarchy triangles"
+            );
+        };
+        return clustered_curves(args, &scene, &source, &ffs, rows, &reference_name);
+    }
 
     let mut csv = String::from(
         "method,form_factors,t_s,iterations,rel_rms_error,max_rel_error,residual,mean_rel_error\n",
@@ -186,4 +200,174 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
 
 fn unreachable_reference() -> anyhow::Result<ErrorStats> {
     anyhow::bail!("internal: no reference chosen")
+}
+
+/// The per-surface reference: `direct` gives none (the direct solve is used), `path` traces
+/// the scene here, a file is read; by default the shipped Mitsuba reference of the builtin
+/// Cornell box, else `path`.
+fn choose_reference(
+    args: &ConvergeArgs,
+    scene: &radiant::scene::Scene,
+) -> anyhow::Result<Option<NamedReference>> {
+    match args.reference.as_deref() {
+        Some("direct") => Ok(None),
+        Some("path") => path_traced(args, scene).map(Some),
+        Some(file) => reference_for(&args.scene, Some(std::path::Path::new(file))),
+        None => match reference_for(&args.scene, None)? {
+            Some(r) => Ok(Some(r)),
+            None => path_traced(args, scene).map(Some),
+        },
+    }
+}
+
+/// Path-traces the per-surface reference and keeps it in `DIR/reference/surfaces.csv`.
+fn path_traced(
+    args: &ConvergeArgs,
+    scene: &radiant::scene::Scene,
+) -> anyhow::Result<NamedReference> {
+    let params = crate::reference_cmd::stopping_rules(
+        None,
+        Some(args.reference_error),
+        Some(args.reference_time),
+        args.solve.seed,
+    )?;
+    let tracer = radiant::reference::Tracer::new(&scene.static_part())?;
+    anyhow::ensure!(
+        tracer.has_emitters(),
+        "the scene has no emitters: there is no light to measure an error of"
+    );
+    let (surfaces, run) = crate::reference_cmd::trace_surfaces(&tracer, &params)?;
+    let dir = args.out.join("reference");
+    ensure_dir(&dir)?;
+    write_atomic(
+        &dir.join("surfaces.csv"),
+        crate::reference_cmd::surfaces_csv(scene, &surfaces).as_bytes(),
+    )?;
+    let (mut a, mut rel) = (0.0, 0.0);
+    for s in surfaces
+        .iter()
+        .filter(|s| s.estimate.rel_error().is_finite())
+    {
+        a += s.area;
+        rel += s.area * s.estimate.rel_error();
+    }
+    let floor = if a > 0.0 { rel / a } else { 0.0 };
+    println!(
+        "reference: path-traced {} surfaces, {} paths in {:.1} s, standard error {:.2} % (area-weighted), worst {:.2} %: errors below that are noise",
+        surfaces.len(),
+        run.paths,
+        run.seconds,
+        100.0 * floor,
+        100.0 * run.rel_error
+    );
+    let rows = surfaces
+        .iter()
+        .map(|s| {
+            (
+                scene.surfaces[s.surface as usize].name.clone(),
+                s.estimate.mean,
+            )
+        })
+        .collect();
+    Ok((
+        format!(
+            "path-traced here, {} paths, se {:.2} %",
+            run.paths,
+            100.0 * floor
+        ),
+        rows,
+    ))
+}
+
+/// Clustered bakes at each refinement threshold, coarse to fine: one point per whole bake
+/// (links and solve), one curve per form-factor method the clustered bake supports.
+fn clustered_curves(
+    args: &ConvergeArgs,
+    scene: &radiant::scene::Scene,
+    source: &str,
+    ffs: &[FormFactorKind],
+    reference: &[(String, Rgb)],
+    reference_name: &str,
+) -> anyhow::Result<()> {
+    use radiant::radiosity::cluster::{self, ClusterParams};
+    anyhow::ensure!(
+        !args.refinements.is_empty() && args.refinements.iter().all(|r| *r > 0.0 && r.is_finite()),
+        "--refinements must be positive numbers"
+    );
+    let mut csv = String::from(
+        "method,form_factors,refinement,t_s,iterations,rel_rms_error,max_rel_error,residual,mean_rel_error,elements,links\n",
+    );
+    let mut curves = Vec::new();
+    for &ff in ffs {
+        if !matches!(ff, FormFactorKind::Analytic | FormFactorKind::RayCast) {
+            println!(
+                "clustered / {}: skipped: the clustered bake uses analytic or raycast form factors",
+                ff.name()
+            );
+            continue;
+        }
+        let label = format!("clustered / {}", ff.name());
+        let mut points = Vec::new();
+        for &r in &args.refinements {
+            let mut params = args.solve.params(SolverKind::Jacobi, ff)?;
+            params.links.refinement = r;
+            let cp = ClusterParams {
+                memory_limit: args.memory_limit,
+                ..ClusterParams::default()
+            };
+            let pb = progress_bar(1, &format!("{label}, refinement {r}"));
+            let t = Instant::now();
+            let result = cluster::bake(scene, &params, &cp, &|_, done, total| {
+                pb.set_length(total as u64);
+                pb.set_position(done as u64);
+            });
+            let t_s = t.elapsed().as_secs_f64();
+            pb.finish_and_clear();
+            let result = match result {
+                Ok(x) => x,
+                Err(e) => {
+                    println!("{label}, refinement {r}: stopped: {e}");
+                    break;
+                }
+            };
+            let e = metrics::compare_surfaces(&result.surfaces, reference)?;
+            let rep = &result.report;
+            let _ = writeln!(
+                csv,
+                "clustered,{},{r},{t_s:.6},{},{:.6e},{:.6e},{:.6e},{:.6e},{},{}",
+                ff.name(),
+                rep.iterations,
+                e.rel_rms,
+                e.max_rel,
+                rep.residual,
+                e.mean_rel,
+                rep.elements,
+                rep.links
+            );
+            println!(
+                "{label:24} refinement {r:<6} {t_s:>8.2} s  mean {:6.3} %  max {:6.3} %  rms {:6.3} %  {} elements, {} links",
+                e.mean_rel * 100.0,
+                e.max_rel * 100.0,
+                e.rel_rms * 100.0,
+                rep.elements,
+                rep.links
+            );
+            points.push((t_s, e.mean_rel));
+        }
+        if !points.is_empty() {
+            curves.push(Curve { label, points });
+        }
+    }
+    write_atomic(&args.out.join("convergence.csv"), csv.as_bytes())?;
+    let png = plot_convergence(
+        &curves,
+        &format!("{source}: mean relative error vs bake time (reference: {reference_name})"),
+    )?;
+    write_atomic(&args.out.join("convergence.png"), &png)?;
+    println!("reference: {reference_name}");
+    println!(
+        "wrote {}/convergence.csv and convergence.png",
+        args.out.display()
+    );
+    Ok(())
 }

@@ -4,6 +4,8 @@
 //! This facade re-exports the workspace's crates:
 //! - [`scene`]: glTF import with validation, the builtin Cornell box;
 //! - [`radiosity`]: meshing, form factors, solvers, error metrics, light maps (pure CPU);
+//! - [`reference`]: a progressive CPU path tracer over the same scene model, the reference the
+//!   bake's error is measured against;
 //! - [`color`]: sRGB transfer functions, CIE colorimetry and tone-map operators;
 //! - [`ecs`]: scenes as `bevy_ecs` entities, the background bake and live rebake, a headless app;
 //! - [`render`] and [`post`] (feature `render`, on by default): the wgpu render graph, passes,
@@ -23,6 +25,7 @@ pub use radiant_ecs as ecs;
 #[cfg(feature = "render")]
 pub use radiant_post as post;
 pub use radiant_radiosity as radiosity;
+pub use radiant_reference as reference;
 #[cfg(feature = "render")]
 pub use radiant_render as render;
 pub use radiant_scene as scene;

@@ -4,6 +4,7 @@ mod bake_cmd;
 mod converge_cmd;
 mod output;
 mod plot;
+mod reference_cmd;
 #[cfg(feature = "render")]
 mod render_cmd;
 #[cfg(feature = "viewer")]
@@ -29,6 +30,10 @@ enum Command {
     Bake(BakeArgs),
     /// Run several method × form-factor combinations and plot their error against run time.
     Converge(ConvergeArgs),
+    /// Path-trace the scene for reference values with standard errors: per-surface radiosity
+    /// (surfaces.csv, which `bake --reference` and `converge --reference` read), points and a
+    /// camera image.
+    Reference(reference_cmd::ReferenceArgs),
     /// Bake, then render one frame headless (G-buffer, SSAO, lighting, bloom, tone mapping):
     /// frame.png (tone-mapped) and frame.exr (linear radiance).
     #[cfg(feature = "render")]
@@ -201,10 +206,33 @@ pub(crate) struct ConvergeArgs {
         default_value = "analytic,hemicube,raycast,montecarlo"
     )]
     pub(crate) form_factors: Vec<String>,
-    /// `direct` (the direct solve on the same mesh: solver error) or a per-surface CSV (total
-    /// error). Default: the shipped Mitsuba 3 reference for the builtin Cornell box, else direct.
+    /// `path` (path-trace the scene first with `radiant reference`'s tracer: total error),
+    /// `direct` (the direct solve on the same mesh: solver error only) or a per-surface CSV
+    /// (total error; `radiant reference` writes one). Default: the shipped Mitsuba 3 reference
+    /// for the builtin Cornell box, else `path`.
     #[arg(long)]
     pub(crate) reference: Option<String>,
+    /// Target relative standard error of each surface for `--reference path`.
+    #[arg(long, default_value_t = 0.005)]
+    pub(crate) reference_error: f64,
+    /// Time limit in seconds for `--reference path`.
+    #[arg(long, default_value_t = 120.0)]
+    pub(crate) reference_time: f64,
+    /// Link hierarchy to measure: `triangles` (one curve per solver × form-factor method, as
+    /// the solve progresses), `clustered` (one curve of clustered bakes at --refinements, each
+    /// point a whole bake), or `auto` (as `bake` chooses).
+    #[arg(long, default_value = "auto", value_parser = ["auto", "clustered", "triangles"])]
+    pub(crate) hierarchy: String,
+    /// Refinement thresholds of the clustered curve, coarse to fine.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0.32,0.16,0.08,0.04,0.02,0.01"
+    )]
+    pub(crate) refinements: Vec<f64>,
+    /// Memory budget of each clustered bake (as `bake --memory-limit`).
+    #[arg(long, value_parser = parse_size)]
+    pub(crate) memory_limit: Option<u64>,
     /// Seconds between error samples.
     #[arg(long, default_value_t = 0.01)]
     pub(crate) sample_every: f64,
@@ -371,6 +399,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Some(Command::Bake(args)) => bake_cmd::run(&args),
         Some(Command::Converge(args)) => converge_cmd::run(&args),
+        Some(Command::Reference(args)) => reference_cmd::run(&args),
         #[cfg(feature = "render")]
         Some(Command::Render(args)) => render_cmd::run(&args),
         #[cfg(feature = "viewer")]

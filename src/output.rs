@@ -59,7 +59,7 @@ pub fn surfaces_csv(surfaces: &[SurfaceMean]) -> String {
     s
 }
 
-fn csv_name(name: &str) -> String {
+pub fn csv_name(name: &str) -> String {
     if name.contains([',', '"', '\n']) {
         format!("\"{}\"", name.replace('"', "\"\""))
     } else {
@@ -188,12 +188,17 @@ pub fn write_lightmaps(dir: &Path, map: &LightMap) -> anyhow::Result<()> {
         .encode(&pixels, w, h)
         .context("encoding the HDR light map")?;
     write_atomic(&dir.join("lightmap.hdr"), &hdr)?;
-    // Exposure: the mean of the lit texels maps to mid grey, then ACES.
-    let lit: Vec<f64> = map
-        .texels
+    let png = preview_png(map.width, map.height, &map.texels)?;
+    write_atomic(&dir.join("lightmap.png"), &png)
+}
+
+/// A tone-mapped sRGB PNG of linear RGB texels (row-major, top row first): the mean of the lit
+/// texels maps to mid grey, then ACES.
+pub fn preview_png(width: u32, height: u32, texels: &[[f32; 3]]) -> anyhow::Result<Vec<u8>> {
+    let lit: Vec<f64> = texels
         .iter()
         .map(|t| radiant::color::luminance(t.map(f64::from)))
-        .filter(|&l| l > 0.0)
+        .filter(|&l| l > 0.0 && l.is_finite())
         .collect();
     let mean = if lit.is_empty() {
         1.0
@@ -201,13 +206,27 @@ pub fn write_lightmaps(dir: &Path, map: &LightMap) -> anyhow::Result<()> {
         lit.iter().sum::<f64>() / lit.len() as f64
     };
     let exposure = if mean > 0.0 { 0.18 / mean } else { 1.0 };
-    let mut png = image::RgbImage::new(map.width, map.height);
-    for (p, t) in png.pixels_mut().zip(&map.texels) {
+    let mut png = image::RgbImage::new(width, height);
+    for (p, t) in png.pixels_mut().zip(texels) {
         let c = radiant::color::Tonemap::AcesFitted.apply(t.map(|v| f64::from(v) * exposure));
         *p = image::Rgb(c.map(radiant::color::linear_to_srgb8));
     }
     let mut bytes = std::io::Cursor::new(Vec::new());
     png.write_to(&mut bytes, image::ImageFormat::Png)
-        .context("encoding the PNG light map")?;
-    write_atomic(&dir.join("lightmap.png"), bytes.get_ref())
+        .context("encoding a PNG preview")?;
+    Ok(bytes.into_inner())
+}
+
+/// Linear RGB texels (row-major, top row first) as an OpenEXR file (32-bit float RGBA).
+pub fn exr_bytes(width: u32, height: u32, texels: &[[f32; 3]]) -> anyhow::Result<Vec<u8>> {
+    let data: Vec<f32> = texels
+        .iter()
+        .flat_map(|t| [t[0], t[1], t[2], 1.0])
+        .collect();
+    let img = image::Rgba32FImage::from_raw(width, height, data)
+        .context("EXR: texel count does not match the size")?;
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut bytes, image::ImageFormat::OpenExr)
+        .context("encoding an EXR image")?;
+    Ok(bytes.into_inner())
 }

@@ -183,6 +183,35 @@ fn bad_input_gives_one_line_and_nonzero_exit() {
             "--reference".into(),
             "/does/not/exist.csv".into(),
         ],
+        vec![
+            "reference".into(),
+            "--builtin".into(),
+            "cornell-box".into(),
+            "--samples".into(),
+            "0".into(),
+        ],
+        vec![
+            "reference".into(),
+            "--builtin".into(),
+            "cornell-box".into(),
+            "--target-error".into(),
+            "nan".into(),
+        ],
+        vec![
+            "reference".into(),
+            "--builtin".into(),
+            "cornell-box".into(),
+            "--samples".into(),
+            "8".into(),
+            "--image".into(),
+            "0x5".into(),
+        ],
+        vec![
+            "reference".into(),
+            dir.join("nan_position.gltf").display().to_string(),
+            "--samples".into(),
+            "8".into(),
+        ],
     ];
     for args in cases {
         let out = tmp("bad");
@@ -418,4 +447,162 @@ fn clustered_bake_reports_its_hierarchy_and_memory_limit_refuses() {
         .expect("runs");
     assert!(!st.status.success());
     assert!(String::from_utf8_lossy(&st.stderr).contains("--hierarchy triangles"));
+}
+
+/// Runs `radiant` and returns its stdout, failing the test with stderr when it fails.
+fn run_ok(args: &[&str], out: &std::path::Path) -> String {
+    let st = radiant()
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .expect("runs");
+    assert!(
+        st.status.success(),
+        "{args:?}: stderr: {}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    String::from_utf8_lossy(&st.stdout).into_owned()
+}
+
+#[test]
+fn reference_writes_surfaces_points_image_and_a_report_the_bake_reads() {
+    let out = tmp("reference");
+    let points = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("assets/reference/cornell_points_rgb_mitsuba.csv");
+    let points = points.display().to_string();
+    let common = [
+        "reference",
+        "--builtin",
+        "cornell-box",
+        "--samples",
+        "512",
+        "--image",
+        "32x24",
+        "--points",
+        &points,
+    ];
+    let stdout = run_ok(&[&common[..], &["--threads", "1"]].concat(), &out);
+    assert!(stdout.contains("stopped by samples"), "{stdout}");
+    let surfaces = std::fs::read_to_string(out.join("surfaces.csv")).expect("surfaces.csv");
+    let mut lines = surfaces.lines();
+    assert_eq!(
+        lines.next(),
+        Some("surface,area,b_r,b_g,b_b,se_r,se_g,se_b,samples")
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 19);
+    for r in &rows {
+        let se: f64 = r[5].parse().expect("se");
+        assert!(se > 0.0 && se.is_finite(), "{r:?}");
+        assert_eq!(r[8], "512");
+    }
+    let pts = std::fs::read_to_string(out.join("points.csv")).expect("points.csv");
+    assert_eq!(pts.lines().count(), 25, "a header and 24 points");
+    let img = image::open(out.join("image.exr"))
+        .expect("image.exr")
+        .to_rgb32f();
+    assert_eq!((img.width(), img.height()), (32, 24));
+    assert!(img.pixels().any(|p| p.0[0] > 1.0), "the light is in view");
+    assert!(out.join("image_se.exr").is_file() && out.join("image.png").is_file());
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report"))
+            .expect("json");
+    assert_eq!(report["surfaces"]["paths"], 19 * 512);
+    assert_eq!(report["image"]["samples_per_pixel"], 512);
+    assert_eq!(report["surfaces"]["stopped_by"], "samples");
+
+    // The same sample count on two threads: the same bytes.
+    let out2 = tmp("reference2");
+    run_ok(&[&common[..], &["--threads", "2"]].concat(), &out2);
+    for f in ["surfaces.csv", "points.csv", "image.exr"] {
+        assert_eq!(
+            std::fs::read(out.join(f)).expect("1 thread"),
+            std::fs::read(out2.join(f)).expect("2 threads"),
+            "{f} differs between 1 and 2 threads"
+        );
+    }
+
+    // The bake takes the file as its reference.
+    let baked = tmp("reference-bake");
+    let reference = out.join("surfaces.csv").display().to_string();
+    let stdout = run_ok(
+        &[
+            "bake",
+            "--builtin",
+            "cornell-box",
+            "--patch-size",
+            "0.3",
+            "--reference",
+            &reference,
+        ],
+        &baked,
+    );
+    assert!(stdout.contains("error against"), "{stdout}");
+    for d in [out, out2, baked] {
+        let _ = std::fs::remove_dir_all(d);
+    }
+}
+
+#[test]
+fn converge_on_a_scene_file_path_traces_its_reference() {
+    let dir = tmp("converge-path");
+    std::fs::create_dir_all(&dir).expect("dir");
+    let scene = dir.join("box.gltf");
+    std::fs::write(&scene, radiant::scene::CORNELL_BOX_GLTF).expect("write scene");
+    let scene = scene.display().to_string();
+    let out = dir.join("out");
+    let coarse = ["--patch-size", "0.3", "--element-levels", "1"];
+    let stdout = run_ok(
+        &[
+            &[
+                "converge",
+                &scene,
+                "--methods",
+                "jacobi",
+                "--form-factors",
+                "analytic",
+            ][..],
+            &coarse,
+            &["--reference-error", "0.02"],
+        ]
+        .concat(),
+        &out,
+    );
+    assert!(stdout.contains("path-traced"), "{stdout}");
+    assert!(out.join("reference/surfaces.csv").is_file());
+    let csv = std::fs::read_to_string(out.join("convergence.csv")).expect("csv");
+    let last: Vec<&str> = csv.lines().last().expect("rows").split(',').collect();
+    let mean: f64 = last[7].parse().expect("mean error");
+    // A coarse bake against path-traced truth: a total error of a few per cent, not zero.
+    assert!(mean > 0.002 && mean < 0.2, "{mean}");
+
+    // The clustered curve: one whole bake per refinement threshold.
+    let out = dir.join("clustered");
+    run_ok(
+        &[
+            &[
+                "converge",
+                &scene,
+                "--hierarchy",
+                "clustered",
+                "--form-factors",
+                "analytic",
+            ][..],
+            &["--refinements", "0.32,0.04", "--reference-error", "0.02"],
+        ]
+        .concat(),
+        &out,
+    );
+    let csv = std::fs::read_to_string(out.join("convergence.csv")).expect("csv");
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 2, "{csv}");
+    let err = |r: &Vec<&str>| r[8].parse::<f64>().expect("mean error");
+    assert!(rows.iter().all(|r| r[0] == "clustered"));
+    assert!(err(&rows[1]) < err(&rows[0]), "finer is closer: {csv}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

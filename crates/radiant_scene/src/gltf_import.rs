@@ -130,6 +130,7 @@ fn load(bytes: &[u8], base: Option<&Path>) -> Result<Scene, SceneError> {
     // Iterative traversal with a depth guard: glTF forbids cycles, but do not trust input.
     let mut stack: Vec<(gltf::Node, DMat4, usize)> =
         roots.into_iter().map(|n| (n, DMat4::IDENTITY, 0)).collect();
+    let mut camera_node: Option<usize> = None;
     while let Some((node, parent, depth)) = stack.pop() {
         if depth > 256 {
             return Err(SceneError::Invalid(
@@ -151,7 +152,9 @@ fn load(bytes: &[u8], base: Option<&Path>) -> Result<Scene, SceneError> {
         if let Some(light) = node.light() {
             importer.light(&name, &light, world)?;
         }
-        if let (Some(cam), None) = (node.camera(), importer.scene.camera)
+        // The first camera in document order (the traversal pops the last root first).
+        if let Some(cam) = node.camera()
+            && camera_node.is_none_or(|i| node.index() < i)
             && let gltf::camera::Projection::Perspective(p) = cam.projection()
         {
             let forward = world.transform_vector3(DVec3::NEG_Z).normalize_or_zero();
@@ -164,6 +167,7 @@ fn load(bytes: &[u8], base: Option<&Path>) -> Result<Scene, SceneError> {
                     up,
                     yfov,
                 });
+                camera_node = Some(node.index());
             }
         }
         for child in node.children() {

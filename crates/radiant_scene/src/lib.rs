@@ -345,6 +345,25 @@ mod tests {
     }
 
     #[test]
+    fn the_first_camera_in_document_order_is_the_scene_camera() {
+        let mut doc: serde_json::Value =
+            serde_json::from_str(CORNELL_BOX_GLTF).expect("builtin glTF is JSON");
+        // A second camera node after the first, also a root: the traversal meets it first.
+        doc["nodes"].as_array_mut().expect("nodes").push(
+            serde_json::json!({"name": "second", "camera": 0, "translation": [5.0, 5.0, 5.0]}),
+        );
+        let n = doc["nodes"].as_array().expect("nodes").len() - 1;
+        doc["scenes"][0]["nodes"]
+            .as_array_mut()
+            .expect("roots")
+            .push(serde_json::json!(n));
+        let text = serde_json::to_string(&doc).expect("serialise");
+        let scene = load_gltf_slice(text.as_bytes()).expect("loads");
+        let cam = scene.camera.expect("camera");
+        assert!((cam.position - DVec3::new(0.278, 0.273, -0.8)).length() < 1e-6);
+    }
+
+    #[test]
     fn unknown_builtin_is_an_error() {
         assert!(matches!(
             builtin("teapot"),
