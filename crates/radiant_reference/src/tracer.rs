@@ -114,6 +114,10 @@ pub struct Tracer {
     pub(crate) tris: Vec<Tri>,
     pub(crate) materials: Vec<Material>,
     bvh: Bvh,
+    /// BVH index → triangle.
+    bvh_ids: Vec<u32>,
+    /// BVH index → the back-to-back twin of a double-sided pair (`u32::MAX`: none).
+    back_twin: Vec<u32>,
     /// Emissive triangles and their power distribution.
     emitters: Vec<u32>,
     emitter_cdf: Cdf,
@@ -192,7 +196,46 @@ impl Tracer {
             });
             local.push([a.as_vec3(), b.as_vec3(), c.as_vec3()]);
         }
-        let bvh = Bvh::new(&local);
+        // A double-sided glTF material arrives as two triangles back to back. Hitting the
+        // back of one at the same distance as the front of the other is a tie a ray may break
+        // either way, and the back absorbs: so only one of a pair goes into the BVH, and a hit
+        // on its back is a hit on its twin's front.
+        let mut seen: std::collections::HashMap<([u64; 9], u32), u32> =
+            std::collections::HashMap::with_capacity(tris.len());
+        let mut bvh_tris = Vec::with_capacity(tris.len());
+        let mut bvh_ids = Vec::with_capacity(tris.len());
+        let mut back_twin = Vec::with_capacity(tris.len());
+        for (i, t) in scene.triangles.iter().enumerate() {
+            let mut v = t.vertices.map(|p| [p.x, p.y, p.z].map(f64::to_bits));
+            v.sort_unstable();
+            let key = (
+                [v[0], v[1], v[2]].concat().try_into().unwrap_or([0; 9]),
+                t.surface,
+            );
+            match seen.get(&key) {
+                Some(&slot) if back_twin[slot as usize] == u32::MAX => {
+                    back_twin[slot as usize] = i as u32;
+                }
+                _ => {
+                    seen.insert(key, bvh_ids.len() as u32);
+                    bvh_tris.push(local[i]);
+                    bvh_ids.push(i as u32);
+                    back_twin.push(u32::MAX);
+                }
+            }
+        }
+        // A pair facing the same way (a duplicated triangle, not a double-sided one) keeps
+        // both halves' fronts: undo the pairing where the normals agree.
+        for slot in 0..bvh_ids.len() {
+            let twin = back_twin[slot];
+            if twin != u32::MAX && tris[twin as usize].n.dot(tris[bvh_ids[slot] as usize].n) > 0.0 {
+                back_twin[slot] = u32::MAX;
+                bvh_tris.push(local[twin as usize]);
+                bvh_ids.push(twin);
+                back_twin.push(u32::MAX);
+            }
+        }
+        let bvh = Bvh::new(&bvh_tris);
         let emitters: Vec<u32> = (0..tris.len() as u32)
             .filter(|&i| {
                 let t = &tris[i as usize];
@@ -226,6 +269,8 @@ impl Tracer {
             tris,
             materials,
             bvh,
+            bvh_ids,
+            back_twin,
             emitters,
             emitter_cdf,
             lights,
@@ -244,13 +289,19 @@ impl Tracer {
         let h = self
             .bvh
             .closest_hit(origin.as_vec3(), dir.as_vec3(), f32::INFINITY)?;
-        if !h.front {
-            return None;
-        }
-        let t = &self.tris[h.triangle as usize];
+        let (index, twin) = (
+            self.bvh_ids[h.triangle as usize],
+            self.back_twin[h.triangle as usize],
+        );
+        let hit = match (h.front, twin) {
+            (true, _) => index,
+            (false, u32::MAX) => return None,
+            (false, twin) => twin,
+        };
+        let t = &self.tris[index as usize];
         // The point from the barycentrics, in f64, rather than origin + t·dir in f32.
         let (u, v) = (h.u.clamp(0.0, 1.0) as f64, h.v.clamp(0.0, 1.0) as f64);
-        Some((h.triangle, t.v0 + t.e1 * u + t.e2 * v))
+        Some((hit, t.v0 + t.e1 * u + t.e2 * v))
     }
 
     fn clear(&self, a: DVec3, b: DVec3) -> bool {
@@ -432,13 +483,15 @@ impl Tracer {
             (-n).as_vec3(),
             (2.0 * lift) as f32,
         )?;
-        if !h.front {
-            return None;
-        }
+        let hit = match (h.front, self.back_twin[h.triangle as usize]) {
+            (true, _) => self.bvh_ids[h.triangle as usize],
+            (false, u32::MAX) => return None,
+            (false, twin) => twin,
+        };
         // The point itself, projected onto the triangle's plane in f64 (the hit's f32
         // barycentrics would move it by rounding).
-        let t = &self.tris[h.triangle as usize];
-        Some((h.triangle, q - t.n * (q - t.v0).dot(t.n)))
+        let t = &self.tris[hit as usize];
+        Some((hit, q - t.n * (q - t.v0).dot(t.n)))
     }
 }
 

@@ -62,6 +62,32 @@ fn white_furnace_converges_to_e_over_one_minus_rho() {
     }
 }
 
+#[test]
+fn double_sided_walls_reflect_on_the_side_a_ray_meets() {
+    // glTF's doubleSided arrives as back-to-back twins: the furnace's walls so, plus an
+    // exact duplicate of one wall facing the same way. Nothing may absorb at a tie.
+    let mut scene = furnace(0.8, 1.0);
+    let tris = scene.triangles.clone();
+    for t in &tris {
+        let [a, b, c] = t.vertices;
+        scene.triangles.push(radiant_scene::Triangle {
+            vertices: [a, c, b],
+            surface: t.surface,
+        });
+    }
+    scene.triangles.push(tris[0]);
+    let tracer = Tracer::new(&scene).expect("furnace");
+    let (s, _) = tracer.surfaces(&samples(20_000), &quiet).expect("trace");
+    // Inside, e/(1 − ρ) = 5 on the 13 inward triangles; the 12 outward ones see nothing and
+    // only emit (1). All 25 have the same area.
+    within(
+        &s[0].estimate,
+        [(13.0 * 5.0 + 12.0) / 25.0; 3],
+        4.0,
+        "double-sided furnace",
+    );
+}
+
 /// A 4 × 4 floor (ρ 0.5) lit by a 100 cd point light 2 above its centre; with `occluder`, a
 /// 1 × 1 upward-facing black square at height 1 above the centre shadows a square of side 2.
 fn lit_floor(occluder: bool) -> Scene {
