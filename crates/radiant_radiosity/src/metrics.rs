@@ -1,7 +1,8 @@
 //! Error metrics: per-surface means, comparison against a reference, and reference files.
 //!
 //! Against a per-surface reference (total error, discretisation included) the metrics are over
-//! surfaces, area-weighted, emitters excluded (their radiosity is their emission):
+//! surfaces, area-weighted, emitters excluded (their radiosity is their emission), with `R`
+//! floored at 1e-3 of its area-weighted mean (a surface the reference finds unlit):
 //! - `mean_rel`: `Σ_s A_s mean_c |B_sc − R_sc| / R_sc / Σ_s A_s`;
 //! - `max_rel`: `max_{s,c} |B_sc − R_sc| / R_sc`;
 //! - `rel_rms`: `sqrt(Σ_s A_s Σ_c (B_sc − R_sc)² / Σ_s A_s Σ_c R_sc²)`.
@@ -107,7 +108,15 @@ pub fn compare_surfaces(
             "no surface of the scene is in the reference".into(),
         ));
     }
-    Ok(stats(pairs.into_iter(), 1e-12))
+    // Relative to at least 1e-3 of the mean: a surface the reference finds (almost) unlit
+    // would otherwise divide by nearly zero.
+    let area: f64 = pairs.iter().map(|p| p.0).sum();
+    let mean_r = pairs
+        .iter()
+        .map(|(a, _, r)| a * (r[0] + r[1] + r[2]) / 3.0)
+        .sum::<f64>()
+        / area.max(f64::MIN_POSITIVE);
+    Ok(stats(pairs.into_iter(), (1e-3 * mean_r).max(1e-12)))
 }
 
 /// Errors of per-element radiosity against a per-element reference (same mesh).

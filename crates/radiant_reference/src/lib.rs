@@ -92,8 +92,8 @@ pub enum ReferenceError {
 pub struct Params {
     /// Samples (paths) per item: per surface, point or pixel.
     pub samples: Option<u64>,
-    /// Target relative standard error: `‖se‖ / ‖mean‖` over RGB per surface or point; over an
-    /// image, `Σ se / Σ mean` over all pixels and channels.
+    /// Target relative standard error: `‖se‖ / ‖mean‖` over RGB per surface or point (after
+    /// at least 4096 paths each); over an image, `Σ se / Σ mean` over all pixels and channels.
     pub target_error: Option<f64>,
     /// Wall-clock limit.
     pub time_limit: Option<Duration>,
@@ -258,6 +258,8 @@ pub struct ImageEstimate {
     pub pixels: Vec<Estimate>,
 }
 
+/// A surface or point stops at the target error only after 16 chunks (4096 paths).
+const MIN_CHUNKS: u64 = 16;
 const KIND_SURFACES: u64 = 1;
 const KIND_POINTS: u64 = 2;
 const KIND_PIXELS: u64 = 3;
@@ -292,6 +294,7 @@ impl Tracer {
                 kind: KIND_SURFACES,
                 chunk: 256,
                 rule: Rule::PerItem,
+                min_chunks: MIN_CHUNKS,
                 what: "surfaces",
                 sample: |i: usize, rng: &mut rng::Rng, rays: &mut u64| {
                     let (_, tris, cdf) = &items[i];
@@ -342,6 +345,7 @@ impl Tracer {
                 kind: KIND_POINTS,
                 chunk: 256,
                 rule: Rule::PerItem,
+                min_chunks: MIN_CHUNKS,
                 what: "points",
                 sample: |i: usize, rng: &mut rng::Rng, rays: &mut u64| {
                     let (tri, x) = located[i];
@@ -394,6 +398,7 @@ impl Tracer {
                 kind: KIND_PIXELS,
                 chunk: 8,
                 rule: Rule::Aggregate,
+                min_chunks: 1,
                 what: "pixels",
                 sample: |i: usize, rng: &mut rng::Rng, rays: &mut u64| {
                     let (px, py) = ((i % w) as f64, (i / w) as f64);

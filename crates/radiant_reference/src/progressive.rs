@@ -76,6 +76,9 @@ pub(crate) struct Job<'a, F> {
     /// Samples per chunk.
     pub(crate) chunk: u64,
     pub(crate) rule: Rule,
+    /// Chunks an item needs before the target may stop it: a dark item whose first few
+    /// hundred paths all found nothing has a standard error of zero that means nothing.
+    pub(crate) min_chunks: u64,
     pub(crate) what: &'static str,
     /// One sample of item `i`: the value, adding the rays it cast to the counter.
     pub(crate) sample: F,
@@ -174,7 +177,7 @@ where
                     let r = sums[i].estimate().rel_error();
                     rel = rel.max(r);
                     if let Some(t) = target {
-                        active[i] = active[i] && r > t;
+                        active[i] = active[i] && (r > t || next[i] < job.min_chunks);
                         if active[i] {
                             let f = if r.is_finite() {
                                 (r / t).powi(2) - 1.0

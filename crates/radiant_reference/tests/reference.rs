@@ -304,7 +304,15 @@ fn one_and_two_threads_give_identical_estimates() {
 
 #[test]
 fn a_target_error_stops_the_estimate_when_met() {
-    let tracer = Tracer::new(&furnace(0.5, 1.0)).expect("furnace");
+    // The furnace, and outside it a square facing away that no light reaches.
+    let mut scene = furnace(0.5, 1.0);
+    let dark = quad(
+        DVec3::new(0.0, 3.0, 0.0),
+        DVec3::new(0.0, 0.0, 1.0),
+        DVec3::new(1.0, 0.0, 0.0),
+    );
+    add_surface(&mut scene, "dark", [0.5; 3], [0.0; 3], &dark);
+    let tracer = Tracer::new(&scene).expect("scene");
     let p = Params {
         samples: None,
         target_error: Some(0.02),
@@ -315,6 +323,9 @@ fn a_target_error_stops_the_estimate_when_met() {
     assert_eq!(run.stopped, Stopped::Target);
     assert!(s[0].estimate.rel_error() <= 0.02);
     assert!(run.rel_error <= 0.02);
+    // All-zero paths have no spread, which proves little: at least 4096 before stopping.
+    assert_eq!(s[1].estimate.mean, [0.0; 3]);
+    assert!(s[1].estimate.samples >= 4096, "{:?}", s[1].estimate);
 }
 
 #[test]
