@@ -267,7 +267,15 @@ pub fn bake(
             .zip(&b)
             .map(|(x, y)| std::array::from_fn(|c| x[c] - y[c]))
             .collect();
-        let (dn, bn) = (sys.norm(&diff), sys.norm(&nb));
+        // Relative to the bounced light (b − source), not to b: in a sunlit level the direct
+        // light dominates ‖b‖, and a change measured against it stopped Sponza after 4
+        // sweeps with its interior 15-25 % too dark.
+        let bounced: Vec<Rgb> = nb
+            .iter()
+            .zip(&sys.source)
+            .map(|(x, s)| std::array::from_fn(|c| x[c] - s[c]))
+            .collect();
+        let (dn, bn) = (sys.norm(&diff), sys.norm(&bounced));
         b = nb;
         iterations += 1;
         let update = if bn > 0.0 { dn / bn } else { 0.0 };

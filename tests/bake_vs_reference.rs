@@ -1,0 +1,105 @@
+//! The bake against the in-project path tracer on scenes with no published reference: a
+//! sunlit room under a skylight, where most of the light is indirect.
+
+use glam::DVec3;
+use radiant::radiosity::cluster::{self, ClusterParams};
+use radiant::radiosity::scenes::{add_surface, quad};
+use radiant::radiosity::{Bake, BakeParams};
+use radiant::reference::{Params, Tracer};
+use radiant::scene::{Light, LightKind, Scene};
+
+/// A 10 × 4 × 10 room (inward faces, ρ 0.7) whose ceiling has a 4 × 4 skylight in its middle,
+/// lit by a sun through it.
+fn skylit_room() -> Scene {
+    let mut s = Scene::default();
+    let (w, h) = (10.0, 4.0);
+    let rho = [0.7, 0.6, 0.5];
+    let y = DVec3::Y * h;
+    let (x, z) = (DVec3::X * w, DVec3::Z * w);
+    add_surface(&mut s, "floor", rho, [0.0; 3], &quad(DVec3::ZERO, z, x));
+    add_surface(&mut s, "wall_x0", rho, [0.0; 3], &quad(DVec3::ZERO, y, z));
+    add_surface(&mut s, "wall_x1", rho, [0.0; 3], &quad(x, z, y));
+    add_surface(&mut s, "wall_z0", rho, [0.0; 3], &quad(DVec3::ZERO, x, y));
+    add_surface(&mut s, "wall_z1", rho, [0.0; 3], &quad(z, y, x));
+    // The ceiling: four quads around the hole [3, 7]², facing down.
+    let c = |a: f64, b: f64| DVec3::new(a, h, b);
+    let mut ceiling = Vec::new();
+    for (o, u, v) in [
+        (c(0.0, 0.0), DVec3::X * 10.0, DVec3::Z * 3.0),
+        (c(0.0, 7.0), DVec3::X * 10.0, DVec3::Z * 3.0),
+        (c(0.0, 3.0), DVec3::X * 3.0, DVec3::Z * 4.0),
+        (c(7.0, 3.0), DVec3::X * 3.0, DVec3::Z * 4.0),
+    ] {
+        ceiling.extend(quad(o, u, v));
+    }
+    add_surface(&mut s, "ceiling", rho, [0.0; 3], &ceiling);
+    s.lights.push(Light {
+        name: "sun".into(),
+        kind: LightKind::Directional,
+        position: DVec3::ZERO,
+        direction: DVec3::new(0.3, -1.0, 0.2).normalize(),
+        color: [1.0; 3],
+        intensity: 10.0,
+        range: None,
+    });
+    s
+}
+
+#[test]
+fn a_skylit_room_bakes_as_the_path_tracer_sees_it() {
+    // Split in 16 per triangle, so that the clustered bake links clusters, not just
+    // triangles.
+    let scene = radiant::radiosity::scenes::tessellated(&skylit_room(), 2);
+    let tracer = Tracer::new(&scene).expect("tracer");
+    let p = Params {
+        samples: Some(32_768),
+        target_error: None,
+        time_limit: None,
+        seed: 1,
+    };
+    let (reference, _) = tracer.surfaces(&p, &|_| {}).expect("trace");
+    let params = BakeParams::default();
+    let tri = Bake::new(&scene, &params)
+        .expect("bake")
+        .run_to_end(&mut |_| {})
+        .expect("solve");
+    let clu = cluster::bake(&scene, &params, &ClusterParams::default(), &|_, _, _| {})
+        .expect("clustered");
+    for r in &reference {
+        let name = &scene.surfaces[r.surface as usize].name;
+        let get = |res: &radiant::radiosity::BakeResult| {
+            res.surfaces
+                .iter()
+                .find(|s| &s.name == name)
+                .expect("surface")
+                .mean
+        };
+        let (t, c) = (get(&tri), get(&clu));
+        let m = r.estimate.mean;
+        for ch in 0..3 {
+            let se = r.estimate.se[ch] / m[ch];
+            let (dt, dc) = ((t[ch] - m[ch]) / m[ch], (c[ch] - m[ch]) / m[ch]);
+            println!(
+                "{name:8} {ch}: ref {:.5} (se {:.2} %)  triangles {:+.2} %  clustered {:+.2} %",
+                m[ch],
+                100.0 * se,
+                100.0 * dt,
+                100.0 * dc
+            );
+            // The bake's own discretisation (3 %) plus four standard errors of the reference.
+            let tol = 0.03 + 4.0 * se;
+            assert!(
+                dt.abs() <= tol,
+                "{name} {ch}: per-triangle bake off by {dt}"
+            );
+            assert!(dc.abs() <= tol, "{name} {ch}: clustered bake off by {dc}");
+        }
+    }
+    assert!(
+        clu.report
+            .clusters
+            .as_ref()
+            .is_some_and(|c| c.cluster_receiver_links + c.cluster_source_links > 0),
+        "the clustered bake must link clusters here"
+    );
+}
