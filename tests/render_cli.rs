@@ -156,3 +156,53 @@ fn bad_render_flags_give_one_line() {
         let _ = std::fs::remove_dir_all(&out);
     }
 }
+
+#[test]
+fn render_compares_with_the_reference_tracers_image() {
+    let dir = tmp("with-reference");
+    let reference = dir.join("reference");
+    let st = radiant()
+        .args([
+            "reference",
+            "--builtin",
+            "cornell-box",
+            "--samples",
+            "64",
+            "--image",
+            "32x32",
+            "--no-surfaces",
+            "--out",
+        ])
+        .arg(&reference)
+        .output()
+        .expect("runs");
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let out = dir.join("render");
+    let st = radiant()
+        .args(["render", "--builtin", "cornell-box", "--patch-size", "0.3"])
+        .arg("--reference-image")
+        .arg(reference.join("image.exr"))
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("json"))
+            .expect("valid json");
+    let r = &report["path_traced_reference"];
+    assert_eq!(r["size"], serde_json::json!([32, 32]));
+    // The same light as the bake, seen through 64 noisy paths per pixel: no bias beyond the
+    // coarse bake's few per cent.
+    let bias = r["surfaces"]["mean_bias"].as_f64().expect("bias");
+    assert!(bias.abs() < 0.08, "mean bias {bias}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
