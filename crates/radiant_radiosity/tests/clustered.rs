@@ -29,7 +29,15 @@ fn accurate() -> BakeParams {
 fn cornell_box_matches_mitsuba() {
     let scene = radiant_scene::builtin("cornell-box").expect("builtin");
     let reference = parse_reference_csv(CORNELL_BOX_REFERENCE).expect("reference parses");
-    let r = bake(&scene, &accurate(), &ClusterParams::default());
+    // Eight visibility samples per link: the largest error sits on the darkest face (the
+    // short block's side facing the red wall, green 0.006) and is Monte Carlo noise of the
+    // cluster links. Measured over seeds 1 to 4: max 1.9-3.6 % with four samples, 2.5-2.8 %
+    // with eight; the mean 0.24-0.27 % either way.
+    let cp = ClusterParams {
+        samples: 8,
+        ..ClusterParams::default()
+    };
+    let r = bake(&scene, &accurate(), &cp);
     assert!(r.report.converged);
     let e = compare_surfaces(&r.surfaces, &reference).expect("compare");
     eprintln!(

@@ -388,26 +388,37 @@ impl Refiner<'_> {
         if f0 <= 0.0 {
             return 0.0;
         }
-        let (mut clear, mut valid) = (0u32, 0u32);
+        // The clear share of the pairs, each weighted by its kernel `cos cos / d²`: the form
+        // factor needs the mean of kernel × visibility, not the product of their means. Where
+        // the near part of a node is clear and its far part behind clutter (a floor among
+        // boxes), the unweighted share undercounted: a room of 25 boxes lost 1 % of its light.
+        let (mut clear, mut valid) = (0.0f64, 0.0f64);
         for k in 0..n {
             let u = (f64::from(k) + rng.f64()) / f64::from(n);
             let x = sample_triangle(&nr.v, u, rng.f64());
             let p = sample_triangle(&ns.v, rng.f64(), rng.f64());
-            if nr.normal.dot(p - x) <= 0.0 || ns.normal.dot(x - p) <= 0.0 {
+            let d = p - x;
+            let (cr, cs) = (nr.normal.dot(d), -ns.normal.dot(d));
+            if cr <= 0.0 || cs <= 0.0 {
                 continue;
             }
-            valid += 1;
+            let d2 = d.length_squared();
+            let w = cr * cs / (d2 * d2);
+            if !(w > 0.0 && w.is_finite()) {
+                continue;
+            }
+            valid += w;
             if self.vis.segment_clear(x.as_vec3(), p.as_vec3()) {
-                clear += 1;
+                clear += w;
             }
         }
-        if valid == 0 {
+        if valid == 0.0 {
             // Every pair grazes: judge by the centroids.
             let clear = self
                 .vis
                 .segment_clear(nr.centroid.as_vec3(), ns.centroid.as_vec3());
             return if clear { f0 } else { 0.0 };
         }
-        f0 * f64::from(clear) / f64::from(valid)
+        f0 * clear / valid
     }
 }

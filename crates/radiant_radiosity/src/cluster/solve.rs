@@ -34,6 +34,9 @@ pub struct HierSystem {
     parent: Vec<u32>,
     /// Weight of every node: the area of its elements outside closed geometry.
     weight: Vec<f64>,
+    /// Per node: its whole area over its live (not enclosed) area; 1 where nothing is enclosed
+    /// (or nothing lives).
+    dilution: Vec<f64>,
     /// Children of every cluster.
     cluster_children: Vec<[u32; 2]>,
     /// Mesh: first child of each node (`u32::MAX` for elements).
@@ -122,6 +125,7 @@ impl HierSystem {
             ff,
             parent: tree.parent.clone(),
             weight: vec![0.0; nodes],
+            dilution: vec![1.0; nodes],
             cluster_children: tree.clusters.iter().map(|c| c.children).collect(),
             first_child: mesh.nodes.iter().map(|n| n.first_child).collect(),
             leaf_node: mesh.leaves.clone(),
@@ -135,8 +139,10 @@ impl HierSystem {
             normal_sh: tree.normal_sh.clone(),
         };
         let mut w = vec![0.0; nodes];
+        let mut full = vec![0.0; nodes];
         for (i, &n) in sys.leaf_node.iter().enumerate() {
             w[n as usize] = if sys.dead[i] { 0.0 } else { sys.area[i] };
+            full[n as usize] = sys.area[i];
         }
         // Children after parents among mesh nodes and among clusters, and every cluster above
         // the mesh roots: mesh nodes backwards, then clusters backwards.
@@ -144,11 +150,18 @@ impl HierSystem {
         for n in (0..m).rev().chain((m..nodes).rev()) {
             if let Some(c) = sys.cluster(n) {
                 w[n] = w[c[0] as usize] + w[c[1] as usize];
+                full[n] = full[c[0] as usize] + full[c[1] as usize];
             } else if sys.first_child[n] != u32::MAX {
                 let f = sys.first_child[n] as usize;
                 w[n] = w[f] + w[f + 1] + w[f + 2] + w[f + 3];
+                full[n] = full[f] + full[f + 1] + full[f + 2] + full[f + 3];
             }
         }
+        sys.dilution = w
+            .iter()
+            .zip(&full)
+            .map(|(&live, &all)| if live > 0.0 { all / live } else { 1.0 })
+            .collect();
         sys.weight = w;
         Ok(sys)
     }
@@ -320,6 +333,28 @@ impl HierSystem {
             .collect();
         drop(nb);
         drop(p);
+        // A receiver's form factors are averages over its whole area, enclosed parts (which
+        // see nothing) included; its live parts, which take the push, get what it gathered
+        // per unit of live area. Without this a floor under 25 boxes (a quarter of it
+        // enclosed) gave its visible parts three quarters of their light.
+        for n in 0..m {
+            let d = self.dilution[n];
+            if d != 1.0 {
+                for v in &mut g[n] {
+                    *v *= d;
+                }
+            }
+        }
+        for (c, acc) in shr.iter_mut().enumerate() {
+            let d = self.dilution[m + c];
+            if d != 1.0 {
+                for ch in acc.iter_mut() {
+                    for v in ch.iter_mut() {
+                        *v *= d;
+                    }
+                }
+            }
+        }
         // Push down: clusters (preorder) first, then mesh nodes (parents before children); a
         // triangle under a cluster takes the cluster's light by its normal.
         for c in 0..shr.len() {
