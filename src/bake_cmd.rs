@@ -403,7 +403,6 @@ pub fn run_default() -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Whether this bake uses the clustered hierarchy (see `--hierarchy`).
 /// `--hierarchy auto`'s size rule: a scene with more than 4096 triangles, or whose
 /// per-triangle mesh would have more than 65 536 elements, bakes clustered.
 pub(crate) fn is_level(
@@ -414,6 +413,7 @@ pub(crate) fn is_level(
         || radiant::radiosity::Mesh::count_elements(scene, &params.mesh)? > 65_536)
 }
 
+/// Whether this bake uses the clustered hierarchy (see `--hierarchy`).
 fn use_clustered(
     args: &BakeArgs,
     scene: &radiant::scene::Scene,

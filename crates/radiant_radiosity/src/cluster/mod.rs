@@ -269,7 +269,7 @@ pub fn bake(
             .collect();
         // Relative to the bounced light (b − source), not to b: in a sunlit level the direct
         // light dominates ‖b‖, and a change measured against it stopped Sponza after 4
-        // sweeps with its interior 15-25 % too dark.
+        // sweeps while its shade was still filling in (now 7).
         let bounced: Vec<Rgb> = nb
             .iter()
             .zip(&sys.source)

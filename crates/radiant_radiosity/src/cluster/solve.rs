@@ -335,8 +335,8 @@ impl HierSystem {
         drop(p);
         // A receiver's form factors are averages over its whole area, enclosed parts (which
         // see nothing) included; its live parts, which take the push, get what it gathered
-        // per unit of live area. Without this a floor under 25 boxes (a quarter of it
-        // enclosed) gave its visible parts three quarters of their light.
+        // per unit of live area. Without this the 1 214-triangle room of boxes baked
+        // 6.1 % too dark against the path tracer instead of 3.6 %.
         for n in 0..m {
             let d = self.dilution[n];
             if d != 1.0 {
