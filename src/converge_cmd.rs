@@ -243,15 +243,7 @@ fn path_traced(
         &dir.join("surfaces.csv"),
         crate::reference_cmd::surfaces_csv(scene, &surfaces).as_bytes(),
     )?;
-    let (mut a, mut rel) = (0.0, 0.0);
-    for s in surfaces
-        .iter()
-        .filter(|s| s.estimate.rel_error().is_finite())
-    {
-        a += s.area;
-        rel += s.area * s.estimate.rel_error();
-    }
-    let floor = if a > 0.0 { rel / a } else { 0.0 };
+    let floor = radiant::reference::mean_rel_error(&surfaces);
     println!(
         "reference: path-traced {} surfaces, {} paths in {:.1} s, standard error {:.2} % (area-weighted), worst {:.2} %: errors below that are noise",
         surfaces.len(),

@@ -319,16 +319,7 @@ pub fn run(args: &ReferenceArgs) -> anyhow::Result<()> {
             &args.out.join("surfaces.csv"),
             surfaces_csv(&scene, &surfaces).as_bytes(),
         )?;
-        // The area-weighted mean relative standard error, the noise floor of any comparison.
-        let (mut a, mut rel) = (0.0, 0.0);
-        for s in surfaces
-            .iter()
-            .filter(|s| s.estimate.rel_error().is_finite())
-        {
-            a += s.area;
-            rel += s.area * s.estimate.rel_error();
-        }
-        let mean_rel = if a > 0.0 { rel / a } else { 0.0 };
+        let mean_rel = radiant::reference::mean_rel_error(&surfaces);
         println!(
             "surfaces: {} surfaces, {} paths in {:.2} s ({:.0} paths/s), worst se {:.3} %, area-weighted {:.3} % (stopped by {})",
             surfaces.len(),

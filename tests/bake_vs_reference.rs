@@ -4,7 +4,7 @@
 use glam::DVec3;
 use radiant::radiosity::cluster::{self, ClusterParams};
 use radiant::radiosity::scenes::{add_surface, quad};
-use radiant::radiosity::{Bake, BakeParams};
+use radiant::radiosity::{Bake, BakeParams, BakeResult};
 use radiant::reference::{Params, Tracer};
 use radiant::scene::{Light, LightKind, Scene};
 
@@ -45,29 +45,43 @@ fn skylit_room() -> Scene {
     s
 }
 
-#[test]
-fn a_skylit_room_bakes_as_the_path_tracer_sees_it() {
-    // Split in 16 per triangle, so that the clustered bake links clusters, not just
-    // triangles.
-    let scene = radiant::radiosity::scenes::tessellated(&skylit_room(), 2);
-    let tracer = Tracer::new(&scene).expect("tracer");
+/// The path tracer's per-surface estimate (`samples` paths each, seed 1), and the
+/// per-triangle and clustered bakes at default settings.
+fn reference_and_bakes(
+    scene: &Scene,
+    samples: u64,
+) -> (
+    Vec<radiant::reference::SurfaceEstimate>,
+    BakeResult,
+    BakeResult,
+) {
+    let tracer = Tracer::new(scene).expect("tracer");
     let p = Params {
-        samples: Some(32_768),
+        samples: Some(samples),
         target_error: None,
         time_limit: None,
         seed: 1,
     };
     let (reference, _) = tracer.surfaces(&p, &|_| {}).expect("trace");
     let params = BakeParams::default();
-    let tri = Bake::new(&scene, &params)
+    let tri = Bake::new(scene, &params)
         .expect("bake")
         .run_to_end(&mut |_| {})
         .expect("solve");
-    let clu = cluster::bake(&scene, &params, &ClusterParams::default(), &|_, _, _| {})
-        .expect("clustered");
+    let clu =
+        cluster::bake(scene, &params, &ClusterParams::default(), &|_, _, _| {}).expect("clustered");
+    (reference, tri, clu)
+}
+
+#[test]
+fn a_skylit_room_bakes_as_the_path_tracer_sees_it() {
+    // Split in 16 per triangle, so that the clustered bake links clusters, not just
+    // triangles.
+    let scene = radiant::radiosity::scenes::tessellated(&skylit_room(), 2);
+    let (reference, tri, clu) = reference_and_bakes(&scene, 32_768);
     for r in &reference {
         let name = &scene.surfaces[r.surface as usize].name;
-        let get = |res: &radiant::radiosity::BakeResult| {
+        let get = |res: &BakeResult| {
             res.surfaces
                 .iter()
                 .find(|s| &s.name == name)
@@ -109,27 +123,13 @@ fn a_room_of_boxes_bakes_as_the_path_tracer_sees_it() {
     // 25 boxes on the floor of a closed room lit by a ceiling panel (1 214 triangles): most of
     // the light is indirect and much of the floor near a box.
     let scene = radiant::radiosity::scenes::room_with_boxes(5, 1);
-    let tracer = Tracer::new(&scene).expect("tracer");
-    let p = Params {
-        samples: Some(65_536),
-        target_error: None,
-        time_limit: None,
-        seed: 1,
-    };
-    let (reference, _) = tracer.surfaces(&p, &|_| {}).expect("trace");
-    let params = BakeParams::default();
-    let tri = Bake::new(&scene, &params)
-        .expect("bake")
-        .run_to_end(&mut |_| {})
-        .expect("solve");
-    let clu = cluster::bake(&scene, &params, &ClusterParams::default(), &|_, _, _| {})
-        .expect("clustered");
+    let (reference, tri, clu) = reference_and_bakes(&scene, 65_536);
     for r in &reference {
         let s = &scene.surfaces[r.surface as usize];
         if s.is_emitter() {
             continue;
         }
-        let get = |res: &radiant::radiosity::BakeResult| {
+        let get = |res: &BakeResult| {
             res.surfaces
                 .iter()
                 .find(|x| x.name == s.name)

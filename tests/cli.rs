@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 
 mod common;
-use common::{radiant, tmp};
+use common::{radiant, run_ok, tmp};
 
 #[test]
 fn bake_writes_every_output() {
@@ -447,22 +447,6 @@ fn clustered_bake_reports_its_hierarchy_and_memory_limit_refuses() {
         .expect("runs");
     assert!(!st.status.success());
     assert!(String::from_utf8_lossy(&st.stderr).contains("--hierarchy triangles"));
-}
-
-/// Runs `radiant` and returns its stdout, failing the test with stderr when it fails.
-fn run_ok(args: &[&str], out: &std::path::Path) -> String {
-    let st = radiant()
-        .args(args)
-        .arg("--out")
-        .arg(out)
-        .output()
-        .expect("runs");
-    assert!(
-        st.status.success(),
-        "{args:?}: stderr: {}",
-        String::from_utf8_lossy(&st.stderr)
-    );
-    String::from_utf8_lossy(&st.stdout).into_owned()
 }
 
 #[test]

@@ -5,7 +5,7 @@
 use std::path::PathBuf;
 
 mod common;
-use common::{radiant, tmp};
+use common::{radiant, run_ok, tmp};
 
 #[test]
 fn render_writes_a_tone_mapped_png_a_linear_exr_and_a_report() {
@@ -161,8 +161,8 @@ fn bad_render_flags_give_one_line() {
 fn render_compares_with_the_reference_tracers_image() {
     let dir = tmp("with-reference");
     let reference = dir.join("reference");
-    let st = radiant()
-        .args([
+    run_ok(
+        &[
             "reference",
             "--builtin",
             "cornell-box",
@@ -171,29 +171,22 @@ fn render_compares_with_the_reference_tracers_image() {
             "--image",
             "32x32",
             "--no-surfaces",
-            "--out",
-        ])
-        .arg(&reference)
-        .output()
-        .expect("runs");
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+        ],
+        &reference,
     );
     let out = dir.join("render");
-    let st = radiant()
-        .args(["render", "--builtin", "cornell-box", "--patch-size", "0.3"])
-        .arg("--reference-image")
-        .arg(reference.join("image.exr"))
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .expect("runs");
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
+    let image = reference.join("image.exr").display().to_string();
+    run_ok(
+        &[
+            "render",
+            "--builtin",
+            "cornell-box",
+            "--patch-size",
+            "0.3",
+            "--reference-image",
+            &image,
+        ],
+        &out,
     );
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("json"))

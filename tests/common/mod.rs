@@ -15,3 +15,20 @@ pub fn tmp(name: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&dir);
     dir
 }
+
+/// Runs `radiant` with `args` and `--out out`; returns its stdout, failing the test with its
+/// stderr when it fails.
+pub fn run_ok(args: &[&str], out: &std::path::Path) -> String {
+    let st = radiant()
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .expect("runs");
+    assert!(
+        st.status.success(),
+        "{args:?}: stderr: {}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    String::from_utf8_lossy(&st.stdout).into_owned()
+}

@@ -3,7 +3,8 @@
 //! A point or spot light of intensity `I` (candela) at distance `d` gives irradiance
 //! `E = I cos θ / d²`; a directional light of illuminance `E⊥` (lux) gives `E⊥ cos θ`. The
 //! radiosity it adds to an element, in emissive units, is `ρ E / π`. Range follows the glTF
-//! recommendation `clamp(1 - (d / range)⁴, 0, 1)`; spot cones use glTF's smooth falloff.
+//! recommendation `clamp(1 - (d / range)⁴, 0, 1)`; spot cones use glTF's smooth falloff. The
+//! formulas are `radiant_scene::Light::irradiance`, which the reference path tracer uses too.
 
 use radiant_scene::{Light, LightKind};
 use radiant_visibility::Visibility;
@@ -54,32 +55,8 @@ fn light_one(
             (d / len, len * frame.scale, local)
         }
     };
-    let cos = node.normal.dot(to_light);
-    if cos <= 0.0 {
-        return;
-    }
-    let mut irr = light.intensity * cos;
-    match light.kind {
-        LightKind::Directional => {}
-        LightKind::Point | LightKind::Spot { .. } => {
-            irr /= dist_world * dist_world;
-            if let Some(range) = light.range {
-                let q = (dist_world / range).powi(4);
-                irr *= (1.0 - q).clamp(0.0, 1.0);
-            }
-        }
-    }
-    if let LightKind::Spot {
-        inner_cone_angle,
-        outer_cone_angle,
-    } = light.kind
-    {
-        let cd = light.direction.dot(-to_light);
-        let (ci, co) = (inner_cone_angle.cos(), outer_cone_angle.cos());
-        let t = ((cd - co) / (ci - co).max(1e-9)).clamp(0.0, 1.0);
-        irr *= t * t;
-    }
-    if !(irr > 0.0 && irr.is_finite()) {
+    let irr = light.irradiance(to_light, node.normal.dot(to_light), dist_world);
+    if irr <= 0.0 {
         return;
     }
     if !vis.segment_clear(x.as_vec3(), target.as_vec3()) {

@@ -236,6 +236,20 @@ pub struct SurfaceEstimate {
     pub estimate: Estimate,
 }
 
+/// The area-weighted mean of the surfaces' relative standard errors (those with a finite
+/// one): the noise floor of any comparison with these estimates.
+pub fn mean_rel_error(surfaces: &[SurfaceEstimate]) -> f64 {
+    let (mut area, mut rel) = (0.0, 0.0);
+    for s in surfaces
+        .iter()
+        .filter(|s| s.estimate.rel_error().is_finite())
+    {
+        area += s.area;
+        rel += s.area * s.estimate.rel_error();
+    }
+    if area > 0.0 { rel / area } else { 0.0 }
+}
+
 /// A point to estimate radiosity at, in scene units.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Point {

@@ -327,29 +327,8 @@ impl Tracer {
                     (d / len, len * self.frame.scale, l.position)
                 }
             };
-            let cos = n.dot(to_light);
-            if cos <= 0.0 {
-                continue;
-            }
-            let mut irr = light.intensity * cos;
-            if !matches!(light.kind, LightKind::Directional) {
-                irr /= dist_world * dist_world;
-                if let Some(range) = light.range {
-                    let q = (dist_world / range).powi(4);
-                    irr *= (1.0 - q).clamp(0.0, 1.0);
-                }
-            }
-            if let LightKind::Spot {
-                inner_cone_angle,
-                outer_cone_angle,
-            } = light.kind
-            {
-                let cd = light.direction.dot(-to_light);
-                let (ci, co) = (inner_cone_angle.cos(), outer_cone_angle.cos());
-                let t = ((cd - co) / (ci - co).max(1e-9)).clamp(0.0, 1.0);
-                irr *= t * t;
-            }
-            if !(irr > 0.0 && irr.is_finite()) {
+            let irr = light.irradiance(to_light, n.dot(to_light), dist_world);
+            if irr <= 0.0 {
                 continue;
             }
             *rays += 1;

@@ -191,6 +191,42 @@ pub struct Light {
     pub range: Option<f64>,
 }
 
+impl Light {
+    /// The irradiance (lux per unit of `color`) this light gives a point whose normal makes
+    /// cosine `cos` with the unit direction `to_light` towards it, `distance` scene units away
+    /// (ignored for directional lights): KHR_lights_punctual's inverse square, the glTF range
+    /// falloff `clamp(1 − (d / range)⁴, 0, 1)` and the smooth spot cone. 0 behind the point,
+    /// and for anything not finite. Shadows are the caller's.
+    pub fn irradiance(&self, to_light: DVec3, cos: f64, distance: f64) -> f64 {
+        if cos <= 0.0 {
+            return 0.0;
+        }
+        let mut irr = self.intensity * cos;
+        if !matches!(self.kind, LightKind::Directional) {
+            irr /= distance * distance;
+            if let Some(range) = self.range {
+                let q = (distance / range).powi(4);
+                irr *= (1.0 - q).clamp(0.0, 1.0);
+            }
+        }
+        if let LightKind::Spot {
+            inner_cone_angle,
+            outer_cone_angle,
+        } = self.kind
+        {
+            let cd = self.direction.dot(-to_light);
+            let (ci, co) = (inner_cone_angle.cos(), outer_cone_angle.cos());
+            let t = ((cd - co) / (ci - co).max(1e-9)).clamp(0.0, 1.0);
+            irr *= t * t;
+        }
+        if irr > 0.0 && irr.is_finite() {
+            irr
+        } else {
+            0.0
+        }
+    }
+}
+
 /// A pinhole camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
