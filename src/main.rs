@@ -53,6 +53,11 @@ pub(crate) struct SceneArgs {
     /// A builtin scene instead of a file: cornell-box.
     #[arg(long)]
     pub(crate) builtin: Option<String>,
+    /// Sky light, in emissive units: L or R,G,B (uniform radiance), gradient:ZENITH/HORIZON
+    /// (each L or R,G,B), FILE.hdr or FILE.exr with an optional @SCALE (equirectangular), or
+    /// none. Replaces the glTF scene extras' radiant.sky.
+    #[arg(long)]
+    pub(crate) sky: Option<String>,
 }
 
 /// Settings shared by `bake` and `converge`.
@@ -64,6 +69,9 @@ pub(crate) struct SolveArgs {
     /// Subdivision levels from patches down to elements; each level splits a triangle in 4.
     #[arg(long, default_value_t = 2)]
     pub(crate) element_levels: u8,
+    /// Sky light: rays per element, stratified (used only when there is a sky).
+    #[arg(long, default_value_t = 64)]
+    pub(crate) sky_rays: u32,
     /// Link refinement threshold (smaller: more accurate, slower).
     #[arg(long, default_value_t = 0.02)]
     pub(crate) refinement: f64,
@@ -265,6 +273,12 @@ impl SolveArgs {
         p.ff.seed = self.seed;
         p.ff.hemicube_resolution = self.hemicube_resolution;
         p.ff.monte_carlo_rays = self.mc_rays;
+        anyhow::ensure!(
+            (1..=65536).contains(&self.sky_rays),
+            "--sky-rays {} must be 1 to 65536",
+            self.sky_rays
+        );
+        p.ff.sky_rays = self.sky_rays;
         p.solver = solver;
         p.solver_params.tolerance = self.tolerance;
         p.solver_params.max_direct = self.max_direct;
@@ -343,17 +357,37 @@ pub(crate) fn parse_ff(s: &str) -> anyhow::Result<FormFactorKind> {
     })
 }
 
-/// Loads the scene named by the arguments.
+/// Loads the scene named by the arguments, with the sky `--sky` gives.
 pub(crate) fn load_scene(args: &SceneArgs) -> anyhow::Result<(radiant::scene::Scene, String)> {
-    match (&args.scene, &args.builtin) {
-        (_, Some(name)) => Ok((radiant::scene::builtin(name)?, name.clone())),
+    let (mut scene, name) = match (&args.scene, &args.builtin) {
+        (_, Some(name)) => (radiant::scene::builtin(name)?, name.clone()),
         (Some(path), None) => {
             let scene = radiant::scene::load_gltf(path)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-            Ok((scene, path.display().to_string()))
+            (scene, path.display().to_string())
         }
         (None, None) => anyhow::bail!("give a scene file or --builtin cornell-box"),
+    };
+    apply_sky(&mut scene, args.sky.as_deref())?;
+    Ok((scene, name))
+}
+
+/// Replaces the scene's sky with `--sky` (`none` removes it).
+pub(crate) fn apply_sky(
+    scene: &mut radiant::scene::Scene,
+    sky: Option<&str>,
+) -> anyhow::Result<()> {
+    match sky.map(str::trim) {
+        None => {}
+        Some("none") => scene.sky = None,
+        Some(spec) => {
+            scene.sky = Some(
+                radiant::scene::Sky::parse(spec, None)
+                    .map_err(|e| anyhow::anyhow!("--sky {spec}: {e}"))?,
+            );
+        }
     }
+    Ok(())
 }
 
 /// `radiant` alone: the viewer on the Cornell box, or the headless path without a display.

@@ -15,6 +15,9 @@ pub(crate) struct ViewArgs {
     /// A builtin scene instead of a file: cornell-box.
     #[arg(long)]
     pub(crate) builtin: Option<String>,
+    /// Sky light, as for `bake --sky`.
+    #[arg(long)]
+    pub(crate) sky: Option<String>,
     /// Window size in logical pixels, WIDTHxHEIGHT.
     #[arg(long, default_value = "1280x720")]
     pub(crate) size: String,
@@ -55,7 +58,7 @@ fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
 /// Opens the viewer. `Err` with a [`radiant_viewer::ViewerError::NoDisplay`] inside when no
 /// window can be opened (the caller may fall back to the headless path).
 pub(crate) fn run(args: &ViewArgs) -> anyhow::Result<()> {
-    let (scene, name) = match (&args.scene, &args.builtin) {
+    let (mut scene, name) = match (&args.scene, &args.builtin) {
         (Some(path), None) => (
             radiant::scene::load_gltf(path)
                 .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?,
@@ -66,6 +69,7 @@ pub(crate) fn run(args: &ViewArgs) -> anyhow::Result<()> {
             (radiant::scene::builtin(&name)?, name)
         }
     };
+    crate::apply_sky(&mut scene, args.sky.as_deref())?;
     let params = args
         .solve
         .params(parse_solver(&args.method)?, parse_ff(&args.form_factors)?)?;

@@ -97,6 +97,20 @@ const CASES: &[(&str, Expect)] = &[
     ("light_negative_intensity.gltf", |e| {
         matches!(e, SceneError::InvalidLight { .. })
     }),
+    (
+        "texture_missing_file.gltf",
+        |e| matches!(e, SceneError::Texture { image, what } if image == "does_not_exist.png" && what.contains("cannot read")),
+    ),
+    (
+        "texture_undecodable.gltf",
+        |e| matches!(e, SceneError::Texture { what, .. } if what.contains("cannot decode")),
+    ),
+    ("texture_without_texcoord.gltf", |e| {
+        matches!(e, SceneError::MissingTexCoord { set: 0, .. })
+    }),
+    ("sky_negative.gltf", |e| {
+        matches!(e, SceneError::InvalidSky(_))
+    }),
 ];
 
 /// Files that must load.

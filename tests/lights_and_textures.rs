@@ -1,6 +1,6 @@
-//! Punctual lights (point, spot, directional with a shadow) and base-colour textures, through the
-//! whole pipeline: glTF JSON with embedded data-URI buffers → import → bake → per-element
-//! radiosity against closed forms.
+//! Punctual lights (point, spot, directional with a shadow), sky light, base-colour textures and
+//! alpha masks, through the whole pipeline: glTF JSON with embedded data-URI buffers → import →
+//! bake (and the reference path tracer) → per-element radiosity against closed forms.
 //!
 //! Every scene is a floor, which cannot see itself, plus at most a black occluder, so there is no
 //! indirect light: each element's radiosity is exactly the direct term `ρ E / π` at its centroid.
@@ -90,6 +90,27 @@ impl Doc {
 
     /// Adds a node with a one-primitive triangle mesh.
     fn mesh(&mut self, name: &str, positions: &[[f32; 3]], indices: &[u16], material: usize) {
+        self.mesh_uv(name, positions, None, indices, material);
+    }
+
+    /// Adds a node with a one-primitive triangle mesh, with TEXCOORD_0 where given.
+    fn mesh_uv(
+        &mut self,
+        name: &str,
+        positions: &[[f32; 3]],
+        uv: Option<&[[f32; 2]]>,
+        indices: &[u16],
+        material: usize,
+    ) {
+        let uv_member = uv.map_or(String::new(), |uv| {
+            let bytes: Vec<u8> = uv.iter().flatten().flat_map(|v| v.to_le_bytes()).collect();
+            let view = self.view(&bytes);
+            self.accessors.push(format!(
+                r#"{{"bufferView":{view},"componentType":5126,"count":{},"type":"VEC2"}}"#,
+                uv.len()
+            ));
+            format!(r#","TEXCOORD_0":{}"#, self.accessors.len() - 1)
+        });
         let pos_bytes: Vec<u8> = positions
             .iter()
             .flatten()
@@ -121,7 +142,7 @@ impl Doc {
         ));
         let (pa, ia) = (self.accessors.len() - 2, self.accessors.len() - 1);
         self.meshes.push(format!(
-            r#"{{"name":"{name}","primitives":[{{"attributes":{{"POSITION":{pa}}},"indices":{ia},"material":{material}}}]}}"#
+            r#"{{"name":"{name}","primitives":[{{"attributes":{{"POSITION":{pa}{uv_member}}},"indices":{ia},"material":{material}}}]}}"#
         ));
         self.nodes.push(format!(
             r#"{{"name":"{name}","mesh":{}}}"#,
@@ -200,6 +221,21 @@ fn rect_up(x0: f32, x1: f32, z0: f32, z1: f32, y: f32) -> ([[f32; 3]; 4], [u16; 
         [[x0, y, z1], [x1, y, z1], [x1, y, z0], [x0, y, z0]],
         [0, 1, 2, 0, 2, 3],
     )
+}
+
+/// Texture coordinates of a rectangle's corners: `(x, z)` itself (the test rectangles are
+/// inside the unit square or tile it).
+fn uv_of(p: &[[f32; 3]]) -> Vec<[f32; 2]> {
+    p.iter().map(|v| [v[0], v[2]]).collect()
+}
+
+/// A PNG data URI of `w × h` RGBA texels.
+fn png_uri(w: u32, h: u32, rgba: Vec<u8>) -> String {
+    let img = image::RgbaImage::from_raw(w, h, rgba).expect("size matches");
+    let mut png = Cursor::new(Vec::new());
+    img.write_to(&mut png, image::ImageFormat::Png)
+        .expect("PNG encodes");
+    format!("data:image/png;base64,{}", base64(png.get_ref()))
 }
 
 /// Rotation by -90° about x as a glTF quaternion (x, y, z, w): the node's -z axis points to -y.
@@ -474,7 +510,7 @@ fn base_color_texture_mean_scales_reflectance() {
         factor[0], factor[1], factor[2]
     ));
     let (p, i) = rect_up(0.0, 1.0, 0.0, 1.0, 0.0);
-    doc.mesh("tile", &p, &i, m);
+    doc.mesh_uv("tile", &p, Some(&uv_of(&p)), &i, m);
     doc.extra
         .push(r#""samplers":[{"magFilter":9729,"minFilter":9729}]"#.into());
     doc.extra
@@ -560,8 +596,11 @@ fn external_image_in_slice_import_is_a_typed_error() {
     doc.extra
         .push(r#""images":[{"uri":"Cargo.toml","mimeType":"image/png"}]"#.into());
     match doc.load() {
-        Err(SceneError::Invalid(msg)) => assert!(msg.contains("external"), "{msg}"),
-        other => panic!("expected Invalid, got {other:?}"),
+        Err(SceneError::Texture { image, what }) => {
+            assert_eq!(image, "Cargo.toml");
+            assert!(what.contains("external"), "{what}");
+        }
+        other => panic!("expected Texture, got {other:?}"),
     }
 }
 
@@ -594,4 +633,302 @@ fn degenerate_triangles_are_skipped_and_reported() {
         r.report.warnings
     );
     assert!(r.radiosity.iter().flatten().all(|v| v.is_finite()));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Textures over element footprints, alpha masks and sky light.
+
+/// Bakes with both hierarchies: the per-triangle one and the clustered one.
+fn bake_both(scene: &Scene, p: &BakeParams) -> [BakeResult; 2] {
+    let triangles = Bake::new(scene, p)
+        .expect("bake prepares")
+        .run_to_end(&mut |_| {})
+        .expect("bake runs");
+    let clustered = radiant::radiosity::cluster::bake(
+        scene,
+        p,
+        &radiant::radiosity::cluster::ClusterParams::default(),
+        &|_, _, _| {},
+    )
+    .expect("clustered bake runs");
+    [triangles, clustered]
+}
+
+/// The unit-square floor under a uniform sky of radiance 1 (in the scene's extras), textured
+/// with a 4 × 4 checkerboard of two greys (nearest filtering).
+fn checker_floor() -> (Scene, [f64; 2]) {
+    let (light, dark) = (230u8, 40u8);
+    let mut rgba = Vec::new();
+    for y in 0..4 {
+        for x in 0..4 {
+            let v = if (x + y) % 2 == 0 { light } else { dark };
+            rgba.extend([v, v, v, 255]);
+        }
+    }
+    let mut doc = Doc::default();
+    let m = doc.material(
+        r#"{"name":"checker","pbrMetallicRoughness":{"baseColorTexture":{"index":0},"metallicFactor":0}}"#
+            .into(),
+    );
+    let (p, i) = rect_up(0.0, 1.0, 0.0, 1.0, 0.0);
+    doc.mesh_uv("floor", &p, Some(&uv_of(&p)), &i, m);
+    doc.extra
+        .push(r#""samplers":[{"magFilter":9728,"minFilter":9728}]"#.into());
+    doc.extra
+        .push(r#""textures":[{"sampler":0,"source":0}]"#.into());
+    doc.extra
+        .push(format!(r#""images":[{{"uri":"{}"}}]"#, png_uri(4, 4, rgba)));
+    let json = doc.json().replacen(
+        r#""scenes":[{"#,
+        r#""scenes":[{"extras":{"radiant":{"sky":"1"}},"#,
+        1,
+    );
+    let scene = load_gltf_slice(json.as_bytes()).expect("checker floor loads");
+    let lin = |v: u8| srgb_to_linear(f64::from(v) / 255.0);
+    (scene, [lin(light), lin(dark)])
+}
+
+#[test]
+fn texture_footprints_give_each_element_its_own_reflectance() {
+    let (scene, [light, dark]) = checker_floor();
+    assert!(matches!(
+        scene.sky,
+        Some(radiant::scene::Sky::Uniform { .. })
+    ));
+    let s = &scene.surfaces[0];
+    assert!((s.reflectance[0] - 0.5 * (light + dark)).abs() < 1e-9);
+    let mut p = BakeParams::default();
+    // Elements with legs of 1/8: each lies inside one checker square of 1/4.
+    p.mesh.patch_size = 1.0;
+    p.mesh.element_levels = 2;
+    for (which, r) in ["per-triangle", "clustered"]
+        .iter()
+        .zip(bake_both(&scene, &p))
+    {
+        let mut worst: f64 = 0.0;
+        let (mut lights, mut darks) = (0, 0);
+        for e in elements(&r) {
+            let (cx, cz) = (e.centroid[0], e.centroid[2]);
+            let cell = ((cx * 4.0).floor() as i64 + (cz * 4.0).floor() as i64) % 2 == 0;
+            let want = if cell { light } else { dark };
+            if cell {
+                lights += 1;
+            } else {
+                darks += 1;
+            }
+            for c in 0..3 {
+                worst = worst.max(rel(e.b[c], want));
+            }
+        }
+        println!(
+            "{which}: {} elements ({lights} light, {darks} dark): worst deviation from ρ·L of \
+             their own footprint {worst:.2e} (texture mean {:.3}, squares {light:.3} / {dark:.3})",
+            lights + darks,
+            0.5 * (light + dark)
+        );
+        assert!(lights > 0 && darks > 0);
+        assert!(worst < 0.01, "{which}: worst {worst}");
+    }
+}
+
+/// The view factor from a point at height 0 to the rectangle `[x0, x1] × [z0, z1]` at height
+/// `h` above it, parallel and facing it (corner superposition).
+fn view_factor_to_rect(p: [f64; 2], x: [f64; 2], z: [f64; 2], h: f64) -> f64 {
+    let f = |a: f64, b: f64| {
+        let (ra, rb) = ((h * h + a * a).sqrt(), (h * h + b * b).sqrt());
+        (a / ra * (b / ra).atan() + b / rb * (a / rb).atan()) / (2.0 * PI)
+    };
+    let (x0, x1, z0, z1) = (x[0] - p[0], x[1] - p[0], z[0] - p[1], z[1] - p[1]);
+    f(x1, z1) - f(x0, z1) - f(x1, z0) + f(x0, z0)
+}
+
+#[test]
+fn sky_lights_an_open_floor_exactly_and_an_occluded_one_by_its_visible_sky() {
+    // Open: every ray escapes, so B = ρ·L exactly. A gradient sky: E = π (h + 2 (z − h) / 3).
+    let mut scene = floor_doc().load().expect("floor");
+    let (zen, hor) = (2.0, 0.5);
+    for (sky, l) in [
+        (radiant::scene::Sky::Uniform { radiance: [1.5; 3] }, 1.5),
+        (
+            radiant::scene::Sky::Gradient {
+                zenith: [zen; 3],
+                horizon: [hor; 3],
+            },
+            hor + 2.0 * (zen - hor) / 3.0,
+        ),
+    ] {
+        scene.sky = Some(sky.clone());
+        let mut p = params();
+        p.ff.sky_rays = 1024;
+        let r = Bake::new(&scene, &p)
+            .expect("prepares")
+            .run_to_end(&mut |_| {})
+            .expect("runs");
+        let mut worst: f64 = 0.0;
+        for e in elements(&r) {
+            for c in 0..3 {
+                worst = worst.max(rel(e.b[c], rho(c) * l));
+            }
+        }
+        println!("open floor under {sky:?}: worst deviation {worst:.2e}");
+        let tol = if matches!(sky, radiant::scene::Sky::Uniform { .. }) {
+            1e-9
+        } else {
+            // Stratified cosine sampling of a linear-in-cos integrand.
+            5e-3
+        };
+        assert!(worst < tol, "{sky:?}: {worst}");
+    }
+    // With a black square roof 2 m × 2 m at 1 m: each element sees the sky minus the roof.
+    let mut doc = floor_doc();
+    let black = doc.material(diffuse("roof", [0.0; 3], true));
+    let (pr, ir) = rect_up(-1.0, 1.0, -1.0, 1.0, 1.0);
+    doc.mesh("roof", &pr, &ir, black);
+    let mut scene = doc.load().expect("floor and roof");
+    let l = 1.0;
+    scene.sky = Some(radiant::scene::Sky::Uniform { radiance: [l; 3] });
+    let mut p = params();
+    p.ff.sky_rays = 1024;
+    let r = Bake::new(&scene, &p)
+        .expect("prepares")
+        .run_to_end(&mut |_| {})
+        .expect("runs");
+    let floor = surface_index(&scene, "floor");
+    let (mut worst, mut count, mut sum_dev): (f64, usize, f64) = (0.0, 0, 0.0);
+    for e in elements(&r).iter().filter(|e| e.surface == floor) {
+        let f = view_factor_to_rect(
+            [e.centroid[0], e.centroid[2]],
+            [-1.0, 1.0],
+            [-1.0, 1.0],
+            1.0,
+        );
+        let want = rho(0) * l * (1.0 - f);
+        let dev = (e.b[0] - want) / (rho(0) * l);
+        worst = worst.max(dev.abs());
+        sum_dev += dev;
+        count += 1;
+    }
+    println!(
+        "floor under a roof: {count} elements, worst |B − ρL(1 − F)| / ρL {worst:.2e}, mean {:.2e}",
+        sum_dev / count as f64
+    );
+    // 1024 stratified rays per element: about 1 % per element, unbiased on average.
+    assert!(worst < 0.02, "worst {worst}");
+    assert!((sum_dev / count as f64).abs() < 2e-3);
+
+    // The reference tracer sees the same sky: the floor's mean radiosity.
+    let tracer = radiant::reference::Tracer::new(&scene).expect("tracer");
+    let params = radiant::reference::Params {
+        samples: Some(200_000),
+        target_error: None,
+        ..Default::default()
+    };
+    let (est, _) = tracer.surfaces(&params, &|_| {}).expect("trace");
+    let baked = r.surfaces[floor as usize].mean[0];
+    let traced = &est[floor as usize].estimate;
+    println!(
+        "floor mean: bake {baked:.5}, tracer {:.5} ± {:.5}",
+        traced.mean[0], traced.se[0]
+    );
+    assert!((baked - traced.mean[0]).abs() < 4.0 * traced.se[0] + 2e-3 * baked);
+}
+
+/// A sun straight down, a black plane at 1 m whose texture is transparent on its left half
+/// (u < 0.5) and opaque on its right, and the floor below.
+fn masked_scene() -> Scene {
+    let mut doc = floor_doc();
+    let mut rgba = Vec::new();
+    for x in 0..2u8 {
+        rgba.extend([0, 0, 0, if x == 0 { 0 } else { 255 }]);
+    }
+    let m = doc.material(
+        r#"{"name":"leaves","alphaMode":"MASK","alphaCutoff":0.5,"pbrMetallicRoughness":{"baseColorTexture":{"index":0},"baseColorFactor":[0,0,0,1],"metallicFactor":0}}"#
+            .into(),
+    );
+    // The plane covers [-2, 2] × [-2, 2]; UVs map it to [0, 1]².
+    let (p, i) = rect_up(-2.0, 2.0, -2.0, 2.0, 1.0);
+    let uv: Vec<[f32; 2]> = p
+        .iter()
+        .map(|v| [(v[0] + 2.0) / 4.0, (v[2] + 2.0) / 4.0])
+        .collect();
+    doc.mesh_uv("leaves", &p, Some(&uv), &i, m);
+    doc.extra.push(
+        r#""samplers":[{"magFilter":9728,"minFilter":9728,"wrapS":33071,"wrapT":33071}]"#.into(),
+    );
+    doc.extra
+        .push(r#""textures":[{"sampler":0,"source":0}]"#.into());
+    doc.extra
+        .push(format!(r#""images":[{{"uri":"{}"}}]"#, png_uri(2, 1, rgba)));
+    doc.light(
+        r#"{"name":"sun","type":"directional","color":[1,1,1],"intensity":1000}"#.into(),
+        POINT_DOWN,
+    );
+    doc.load().expect("masked scene loads")
+}
+
+#[test]
+fn alpha_masks_let_light_through_where_they_cut() {
+    let scene = masked_scene();
+    assert!(matches!(
+        scene.surfaces[surface_index(&scene, "leaves") as usize].alpha,
+        radiant::scene::AlphaMode::Mask { .. }
+    ));
+    let floor = surface_index(&scene, "floor");
+    let open = rho(0) * 1000.0 / PI;
+    for (which, r) in ["per-triangle", "clustered"]
+        .iter()
+        .zip(bake_both(&scene, &params()))
+    {
+        // Under the plane: lit where x < 0 (the cut half), dark where x > 0. The mask's edge
+        // lies on element edges, so each element is wholly one or the other.
+        let (mut lit, mut dark, mut wrong) = (0, 0, Vec::new());
+        let mut flux = 0.0;
+        let mut area = 0.0;
+        for e in elements(&r).iter().filter(|e| e.surface == floor) {
+            let [x, _, z] = e.centroid;
+            if x.abs() > 2.0 || z.abs() > 2.0 {
+                continue;
+            }
+            let want = if x < 0.0 { open } else { 0.0 };
+            if x < 0.0 {
+                lit += 1;
+            } else {
+                dark += 1;
+            }
+            if (e.b[0] - want).abs() > 1e-9 * open {
+                wrong.push(format!("({x:.3}, {z:.3}): {} want {want}", e.b[0]));
+            }
+            flux += e.b[0];
+            area += 1.0;
+        }
+        println!(
+            "{which}: under the masked plane {lit} lit and {dark} shadowed elements; fraction of \
+             the open sun's light {:.4} (closed form 0.5)",
+            flux / area / open
+        );
+        assert!(wrong.is_empty(), "{which}: {}", wrong.join("; "));
+        assert_eq!(lit, dark);
+    }
+    // The tracer, by sampling: the floor under the plane gets half the sun, within 4 se.
+    let tracer = radiant::reference::Tracer::new(&scene).expect("tracer");
+    let points: Vec<radiant::reference::Point> = [(-1.0, 0.0, 1.0), (1.0, 0.0, 0.0)]
+        .iter()
+        .map(|&(x, z, _)| radiant::reference::Point {
+            name: format!("{x}"),
+            position: glam::DVec3::new(x, 0.0, z),
+            normal: glam::DVec3::Y,
+        })
+        .collect();
+    let params = radiant::reference::Params {
+        samples: Some(4096),
+        target_error: None,
+        ..Default::default()
+    };
+    let (est, _) = tracer.points(&points, &params, &|_| {}).expect("trace");
+    println!(
+        "tracer: under the cut half {:.3} (open {open:.3}), under the opaque half {:.3}",
+        est[0].mean[0], est[1].mean[0]
+    );
+    assert!((est[0].mean[0] - open).abs() < 1e-9 * open + 4.0 * est[0].se[0]);
+    assert!(est[1].mean[0].abs() < 1e-12);
 }

@@ -156,6 +156,35 @@ def image_view_out_of_bounds(d):
 
 case("image_view_out_of_bounds.gltf", mutated(image_view_out_of_bounds))
 
+
+def png_1x1(rgba):
+    """A valid 1 x 1 RGBA PNG."""
+    import zlib
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    ihdr = struct.pack(">IIBBBBB", 1, 1, 8, 6, 0, 0, 0)
+    raw = b"\0" + bytes(rgba)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b"")
+
+
+def textured(uri):
+    def apply(d):
+        d["images"] = [{"uri": uri}]
+        d["textures"] = [{"source": 0}]
+        d["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0}
+    return apply
+
+
+PNG_URI = "data:image/png;base64," + base64.b64encode(png_1x1([200, 100, 50, 255])).decode("ascii")
+# Textures: a missing file, bytes that are no image, and a texture on a primitive without UVs.
+case("texture_missing_file.gltf", mutated(textured("does_not_exist.png")))
+case("texture_undecodable.gltf", mutated(textured("data:image/png;base64," + base64.b64encode(b"not a png at all").decode("ascii"))))
+case("texture_without_texcoord.gltf", mutated(textured(PNG_URI)))
+# A sky with negative radiance in the scene's extras.
+case("sky_negative.gltf", mutated(lambda d: d["scenes"][0].update(extras={"radiant": {"sky": {"radiance": [1.0, -1.0, 1.0]}}})))
+
 # Geometry.
 case("index_out_of_range.gltf", document(indices=[0, 1, 2, 0, 2, 7]))
 case("nan_position.gltf", document(positions=[QUAD[0], (math.nan, 0.0, 0.0), QUAD[2], QUAD[3]]))

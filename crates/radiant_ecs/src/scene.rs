@@ -2,8 +2,8 @@
 //! lights and the camera; and the gathering of the static ones back into a radiosity [`Scene`].
 
 use bevy_ecs::prelude::*;
-use glam::{DAffine3, DQuat, DVec3};
-use radiant_scene::{Camera, Light, Scene, Surface, Triangle};
+use glam::{DAffine3, DQuat, DVec3, Vec2, Vec3};
+use radiant_scene::{AlphaMode, Camera, Image, Light, Scene, Sky, Surface, TextureRef, Triangle};
 
 use crate::app::{App, Plugin, PostUpdate};
 
@@ -58,11 +58,50 @@ impl Default for GlobalTransform {
 }
 
 /// Triangles in the entity's local space.
-#[derive(Component, Clone, Debug, PartialEq)]
+#[derive(Component, Clone, Debug, Default, PartialEq)]
 pub struct Geometry {
     /// Counter-clockwise triangles (the front face is the normal's side).
     pub triangles: Vec<[DVec3; 3]>,
+    /// Per triangle: shading normals (local space) and texture coordinates; empty for flat,
+    /// untextured geometry.
+    pub attributes: Vec<TriangleAttributes>,
 }
+
+/// A triangle's shading normals and its two UV sets (see [`radiant_scene::Triangle`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TriangleAttributes {
+    /// Unit normals at the vertices, local space.
+    pub normals: [Vec3; 3],
+    /// TEXCOORD_0 and TEXCOORD_1 at the vertices.
+    pub uv: [[Vec2; 3]; 2],
+}
+
+/// A surface's textures and alpha mode, beside its [`Material`] (whose colours the textures
+/// modulate). Absent on untextured, opaque surfaces.
+#[derive(Component, Clone, Copy, Debug, PartialEq)]
+pub struct MaterialTextures {
+    /// The base-colour texture (an index into [`SceneImages`]).
+    pub base_color: Option<TextureRef>,
+    /// The base colour factor's alpha.
+    pub base_color_alpha: f64,
+    /// The emissive texture.
+    pub emissive: Option<TextureRef>,
+    /// Opaque, masked or blended.
+    pub alpha: AlphaMode,
+    /// Whether the surface's triangles include back-facing twins.
+    pub double_sided: bool,
+    /// TEXCOORD sets the surface has.
+    pub tex_coords: u8,
+}
+
+/// The images the scene's textures read.
+#[derive(Resource, Clone, Debug, Default, PartialEq)]
+pub struct SceneImages(pub Vec<Image>);
+
+/// Light from outside the scene: `None` for none. The bake and the renderer read it; the
+/// inspector edits it.
+#[derive(Resource, Clone, Debug, Default, PartialEq)]
+pub struct SceneSky(pub Option<Sky>);
 
 /// A Lambertian material.
 #[derive(Component, Clone, Copy, Debug, PartialEq)]
@@ -116,17 +155,23 @@ pub fn spawn_scene(world: &mut World, scene: &Scene) -> Entity {
     let root = world
         .spawn((SceneRoot, Transform::IDENTITY, Name::new("scene")))
         .id();
-    let mut tris: Vec<Vec<[DVec3; 3]>> = vec![Vec::new(); scene.surfaces.len()];
+    let mut geometry: Vec<Geometry> = vec![Geometry::default(); scene.surfaces.len()];
     for t in &scene.triangles {
-        if let Some(v) = tris.get_mut(t.surface as usize) {
-            v.push(t.vertices);
+        if let Some(g) = geometry.get_mut(t.surface as usize) {
+            g.triangles.push(t.vertices);
+            g.attributes.push(TriangleAttributes {
+                normals: t.normals,
+                uv: t.uv,
+            });
         }
     }
-    for (i, (s, triangles)) in scene.surfaces.iter().zip(tris).enumerate() {
+    world.insert_resource(SceneImages(scene.images.clone()));
+    world.insert_resource(SceneSky(scene.sky.clone()));
+    for (i, (s, geometry)) in scene.surfaces.iter().zip(geometry).enumerate() {
         let mut e = world.spawn((
             Name::new(s.name.clone()),
             Transform::IDENTITY,
-            Geometry { triangles },
+            geometry,
             Material {
                 reflectance: s.reflectance,
                 emission: s.emission,
@@ -137,6 +182,21 @@ pub fn spawn_scene(world: &mut World, scene: &Scene) -> Entity {
         // glTF nodes are static unless their extras say dynamic.
         if !s.dynamic {
             e.insert(Static);
+        }
+        if s.base_color_texture.is_some()
+            || s.emissive_texture.is_some()
+            || s.alpha != AlphaMode::Opaque
+            || s.double_sided
+            || s.tex_coords > 0
+        {
+            e.insert(MaterialTextures {
+                base_color: s.base_color_texture,
+                base_color_alpha: s.base_color_alpha,
+                emissive: s.emissive_texture,
+                alpha: s.alpha,
+                double_sided: s.double_sided,
+                tex_coords: s.tex_coords,
+            });
         }
     }
     for l in &scene.lights {
@@ -198,30 +258,56 @@ fn gather(world: &mut World, with_dynamic: bool) -> Scene {
         Option<&Name>,
         &Geometry,
         &Material,
+        Option<&MaterialTextures>,
         Option<&GlobalTransform>,
         Has<Static>,
     )>();
-    let mut rows: Vec<_> = q.iter(world).filter(|r| r.5 || with_dynamic).collect();
+    let mut rows: Vec<_> = q.iter(world).filter(|r| r.6 || with_dynamic).collect();
     rows.sort_by_key(|r| *r.0);
     let mut scene = Scene::default();
-    for (order, name, geometry, material, global, is_static) in rows {
+    for (order, name, geometry, material, textures, global, is_static) in rows {
         let m = global.map_or(DAffine3::IDENTITY, |g| g.0);
+        // Normals follow the inverse transpose; a mirroring transform flips the winding.
+        let normal_matrix = m.matrix3.inverse().transpose();
+        let flip = m.matrix3.determinant() < 0.0;
         let surface = scene.surfaces.len() as u32;
         let name = name.map_or_else(|| format!("surface{}", order.0), |n| n.as_str().to_string());
-        scene.surfaces.push(Surface {
+        let mut s = Surface {
             material: name.clone(),
             name,
             reflectance: material.reflectance,
             emission: material.emission,
             dynamic: !is_static,
-        });
-        for t in &geometry.triangles {
-            scene.triangles.push(Triangle {
-                vertices: t.map(|p| m.transform_point3(p)),
-                surface,
-            });
+            ..Surface::default()
+        };
+        if let Some(t) = textures {
+            s.base_color_texture = t.base_color;
+            s.base_color_alpha = t.base_color_alpha;
+            s.emissive_texture = t.emissive;
+            s.alpha = t.alpha;
+            s.double_sided = t.double_sided;
+            s.tex_coords = t.tex_coords;
+        }
+        scene.surfaces.push(s);
+        for (k, t) in geometry.triangles.iter().enumerate() {
+            let mut tri = Triangle::new(t.map(|p| m.transform_point3(p)), surface);
+            if let Some(a) = geometry.attributes.get(k) {
+                tri.normals = a
+                    .normals
+                    .map(|n| (normal_matrix * n.as_dvec3()).normalize_or_zero().as_vec3());
+                tri.uv = a.uv;
+            }
+            if flip {
+                tri = tri.rewound();
+            }
+            scene.triangles.push(tri);
         }
     }
+    scene.images = world
+        .get_resource::<SceneImages>()
+        .map(|i| i.0.clone())
+        .unwrap_or_default();
+    scene.sky = world.get_resource::<SceneSky>().and_then(|s| s.0.clone());
     let mut lights = world.query::<(&PunctualLight, Option<&GlobalTransform>)>();
     for (l, g) in lights.iter(world) {
         let m = g.map_or(DAffine3::IDENTITY, |g| g.0);

@@ -13,7 +13,7 @@ use crate::mesh::{Mesh, MeshParams};
 use crate::metrics::{SurfaceMean, surface_means};
 use crate::solvers::{Progress, Solver, SolverKind, SolverParams, new_solver};
 use crate::system::{Rgb, System};
-use crate::{BakeError, lights};
+use crate::{BakeError, input};
 
 /// Everything a bake can be told. `Default` gives the settings the accuracy tests hold to.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -197,8 +197,14 @@ pub struct Bake {
     times: PhaseTimes,
     warnings: Vec<String>,
     has_emitters: bool,
-    /// Per element: irradiance from the punctual lights (shadowed), for material edits.
+    /// Per element: irradiance from the punctual lights and the sky (shadowed), for material
+    /// edits.
     direct: Option<Vec<Rgb>>,
+    /// Per element: the textures' footprints, for material edits.
+    textures: Option<input::ElementTextures>,
+    /// The scene's alpha masks and sky, for light edits.
+    masks: Option<std::sync::Arc<radiant_scene::AlphaMasks>>,
+    sky: Option<radiant_scene::Sky>,
     /// Elements inside closed geometry.
     dead: Vec<bool>,
     /// Fingerprint of geometry, lights and link parameters (for checkpoints).
@@ -365,27 +371,16 @@ impl Bake {
             });
         }
         lap(&mut times.meshing);
-        let bvh = Bvh::new(&mesh.root_triangles_f32());
+        let masks = input::masks(scene);
+        let bvh = input::visibility(&mesh, masks.as_ref());
         lap(&mut times.visibility);
 
         let n = mesh.element_count();
-        let mut rho = Vec::with_capacity(n);
-        let mut source = Vec::with_capacity(n);
-        for &id in &mesh.leaves {
-            let s =
-                &scene.surfaces[mesh.root_surface[mesh.nodes[id as usize].root as usize] as usize];
-            rho.push(s.reflectance);
-            source.push(s.emission);
-        }
-        let direct = (!scene.lights.is_empty())
-            .then(|| lights::direct_irradiance(&mesh, &scene.lights, &bvh));
-        if let Some(direct) = &direct {
-            for i in 0..n {
-                for c in 0..3 {
-                    source[i][c] += rho[i][c] * direct[i][c] / std::f64::consts::PI;
-                }
-            }
-        }
+        let textures = input::element_textures(scene, &mesh);
+        let (rho, emission) = input::materials(&scene.surfaces, &mesh, textures.as_ref());
+        let direct =
+            input::direct_irradiance(&scene.lights, scene.sky.as_ref(), &mesh, &bvh, &params.ff);
+        let source = input::sources(&rho, &emission, direct.as_deref());
         lap(&mut times.direct_light);
 
         let mut warnings = scene.warnings();
@@ -453,6 +448,9 @@ impl Bake {
             warnings,
             has_emitters,
             direct,
+            textures,
+            masks,
+            sky: scene.sky.clone(),
             dead,
             fingerprint,
             resumed,
@@ -546,21 +544,8 @@ impl Bake {
             ..Scene::default()
         };
         validate(&probe)?;
-        let n = self.system.len();
-        let mut rho = Vec::with_capacity(n);
-        let mut source = Vec::with_capacity(n);
-        for (i, &id) in self.mesh.leaves.iter().enumerate() {
-            let root = self.mesh.nodes[id as usize].root as usize;
-            let s = &surfaces[self.mesh.root_surface[root] as usize];
-            rho.push(s.reflectance);
-            let mut e = s.emission;
-            if let Some(d) = &self.direct {
-                for c in 0..3 {
-                    e[c] += s.reflectance[c] * d[i][c] / std::f64::consts::PI;
-                }
-            }
-            source.push(e);
-        }
+        let (rho, emission) = input::materials(surfaces, &self.mesh, self.textures.as_ref());
+        let source = input::sources(&rho, &emission, self.direct.as_deref());
         let has_emitters = source.iter().any(|s| s.iter().any(|&v| v > 0.0));
         if has_emitters && !self.has_emitters {
             return Err(BakeError::NeedsRebuild);
@@ -592,9 +577,15 @@ impl Bake {
         }
         let old = self.direct.take();
         let old_lights = std::mem::replace(&mut self.lights, lights.to_vec());
-        if !lights.is_empty() {
-            let bvh = Bvh::new(&self.mesh.root_triangles_f32());
-            self.direct = Some(lights::direct_irradiance(&self.mesh, lights, &bvh));
+        if !lights.is_empty() || self.sky.is_some() {
+            let bvh = input::visibility(&self.mesh, self.masks.as_ref());
+            self.direct = input::direct_irradiance(
+                lights,
+                self.sky.as_ref(),
+                &self.mesh,
+                &bvh,
+                &self.params.ff,
+            );
         }
         let surfaces = self.surfaces.clone();
         let result = self.edit_surfaces(&surfaces);
@@ -723,28 +714,23 @@ impl Bake {
         };
         let changed = links::ChangeSet::new(&changed, margin);
         // The current solution, carried over to the elements that stay.
-        let n = mesh.element_count();
         let b_old = self.radiosity();
         let b: Vec<Rgb> = old_of_new_leaf
             .iter()
             .map(|&o| b_old.get(o as usize).copied().unwrap_or([0.0; 3]))
             .collect();
-        let bvh = Bvh::new(&mesh.root_triangles_f32());
-        let direct = (!scene.lights.is_empty())
-            .then(|| lights::direct_irradiance(&mesh, &scene.lights, &bvh));
-        let (mut rho, mut source) = (Vec::with_capacity(n), Vec::with_capacity(n));
-        for (i, &id) in mesh.leaves.iter().enumerate() {
-            let root = mesh.nodes[id as usize].root as usize;
-            let s = &scene.surfaces[mesh.root_surface[root] as usize];
-            let mut e = s.emission;
-            if let Some(d) = &direct {
-                for c in 0..3 {
-                    e[c] += s.reflectance[c] * d[i][c] / std::f64::consts::PI;
-                }
-            }
-            rho.push(s.reflectance);
-            source.push(e);
-        }
+        let masks = input::masks(scene);
+        let bvh = input::visibility(&mesh, masks.as_ref());
+        let textures = input::element_textures(scene, &mesh);
+        let (rho, emission) = input::materials(&scene.surfaces, &mesh, textures.as_ref());
+        let direct = input::direct_irradiance(
+            &scene.lights,
+            scene.sky.as_ref(),
+            &mesh,
+            &bvh,
+            &self.params.ff,
+        );
+        let source = input::sources(&rho, &emission, direct.as_deref());
         if !source.iter().flatten().any(|&v| v > 0.0) {
             // Lights that reach nothing: a fresh bake would say so and build no links.
             return Err(BakeError::NeedsRebuild);
@@ -786,6 +772,9 @@ impl Bake {
         self.system = System::new(&mesh, rho, source, new_links, &dead);
         self.dead = dead;
         self.direct = direct;
+        self.textures = textures;
+        self.masks = masks;
+        self.sky = scene.sky.clone();
         self.bhat = bhat;
         self.eps = eps;
         self.oracle_known = true;

@@ -24,6 +24,7 @@ pub mod bake;
 pub mod checkpoint;
 pub mod cluster;
 pub mod form_factors;
+pub mod input;
 pub mod lightmap;
 pub mod lights;
 pub mod links;

@@ -52,14 +52,11 @@ pub fn add_surface(
         material: name.into(),
         reflectance: rho,
         emission,
-        dynamic: false,
+        ..Surface::default()
     });
     scene
         .triangles
-        .extend(tris.iter().map(|&vertices| Triangle {
-            vertices,
-            surface: id,
-        }));
+        .extend(tris.iter().map(|&vertices| Triangle::new(vertices, id)));
     id
 }
 
@@ -100,11 +97,19 @@ pub fn tessellated(scene: &Scene, levels: u32) -> Scene {
             .triangles
             .iter()
             .flat_map(|t| {
-                let [a, b, c] = t.vertices;
-                let (ab, bc, ca) = ((a + b) * 0.5, (b + c) * 0.5, (c + a) * 0.5);
-                [[a, ab, ca], [ab, b, bc], [ca, bc, c], [bc, ca, ab]].map(|vertices| Triangle {
-                    vertices,
+                // Corners of the four children as (corner, corner) pairs of the parent: a
+                // corner is its own pair, an edge midpoint the mean of its two ends.
+                const KIDS: [[(usize, usize); 3]; 4] = [
+                    [(0, 0), (0, 1), (2, 0)],
+                    [(0, 1), (1, 1), (1, 2)],
+                    [(2, 0), (1, 2), (2, 2)],
+                    [(1, 2), (2, 0), (0, 1)],
+                ];
+                KIDS.map(|kid| Triangle {
+                    vertices: kid.map(|(i, j)| (t.vertices[i] + t.vertices[j]) * 0.5),
                     surface: t.surface,
+                    normals: kid.map(|(i, j)| (t.normals[i] + t.normals[j]).normalize_or_zero()),
+                    uv: t.uv.map(|uv| kid.map(|(i, j)| (uv[i] + uv[j]) * 0.5)),
                 })
             })
             .collect();

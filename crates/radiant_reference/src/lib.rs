@@ -421,8 +421,9 @@ impl Tracer {
                     let dir = (forward + right * sx + up * sy).normalize();
                     *rays += 1;
                     match self.trace(origin, dir) {
-                        Some((tri, x)) => self.outgoing(tri, x, rng, rays),
-                        None => [0.0; 3],
+                        tracer::Found::Surface(tri, x) => self.outgoing(tri, x, rng, rays),
+                        tracer::Found::Absorbed => [0.0; 3],
+                        tracer::Found::Escaped => self.sky(dir),
                     }
                 },
                 progress,

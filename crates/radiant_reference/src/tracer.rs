@@ -16,8 +16,11 @@
 
 use std::f64::consts::PI;
 
-use glam::DVec3;
-use radiant_scene::{Light, LightKind, Scene};
+use std::sync::Arc;
+
+use glam::{DVec3, Vec2};
+use radiant_scene::texture::barycentric;
+use radiant_scene::{AlphaMasks, Image, Light, LightKind, Scene, Sky, TextureRef};
 use radiant_visibility::{Bvh, Visibility};
 
 use crate::ReferenceError;
@@ -41,6 +44,8 @@ pub(crate) struct Tri {
     /// Area in the local frame.
     pub(crate) area: f64,
     pub(crate) surface: u32,
+    /// The scene triangle's two UV sets.
+    pub(crate) uv: [[Vec2; 3]; 2],
 }
 
 impl Tri {
@@ -68,8 +73,22 @@ impl Frame {
 
 #[derive(Clone, Debug)]
 pub(crate) struct Material {
+    /// Mean reflectance and emission (over the whole texture where there is one).
     pub(crate) rho: [f64; 3],
     pub(crate) emission: [f64; 3],
+    /// Textures modulate them: at a point, the texel over the texture's mean.
+    pub(crate) rho_texture: Option<(TextureRef, [f64; 4])>,
+    pub(crate) emission_texture: Option<(TextureRef, [f64; 4])>,
+}
+
+/// What a ray found.
+pub(crate) enum Found {
+    /// A front face (or a double-sided twin's): the triangle and the point.
+    Surface(u32, DVec3),
+    /// A back face, which absorbs.
+    Absorbed,
+    /// Nothing: the ray left the scene (and sees the sky, if any).
+    Escaped,
 }
 
 /// A punctual light in the local frame.
@@ -122,6 +141,8 @@ pub struct Tracer {
     emitters: Vec<u32>,
     emitter_cdf: Cdf,
     lights: Vec<LocalLight>,
+    images: Vec<Image>,
+    sky: Option<Sky>,
 }
 
 impl Tracer {
@@ -172,9 +193,17 @@ impl Tracer {
                     s.name
                 )));
             }
+            let with_mean = |t: Option<TextureRef>| {
+                t.and_then(|t| {
+                    let img = scene.images.get(t.image as usize)?;
+                    Some((t, img.mean_linear()))
+                })
+            };
             materials.push(Material {
                 rho: s.reflectance,
                 emission: s.emission,
+                rho_texture: with_mean(s.base_color_texture),
+                emission_texture: with_mean(s.emissive_texture),
             });
         }
         let mut tris = Vec::with_capacity(scene.triangles.len());
@@ -193,6 +222,7 @@ impl Tracer {
                 n,
                 area: 0.5 * len,
                 surface: t.surface,
+                uv: t.uv,
             });
             local.push([a.as_vec3(), b.as_vec3(), c.as_vec3()]);
         }
@@ -235,7 +265,20 @@ impl Tracer {
                 back_twin.push(u32::MAX);
             }
         }
-        let bvh = Bvh::new(&bvh_tris);
+        // Alpha masks, asked about by BVH index (a folded pair's kept half has its own UVs).
+        let bvh = match AlphaMasks::new(scene) {
+            Some(masks) => {
+                let masks = Arc::new(masks);
+                let ids = Arc::new(bvh_ids.clone());
+                let (m2, ids2) = (Arc::clone(&masks), Arc::clone(&ids));
+                Bvh::with_filter(
+                    &bvh_tris,
+                    move |i| m2.is_masked(ids2[i as usize]),
+                    Arc::new(move |i, u, v| masks.blocks(ids[i as usize], u, v)),
+                )
+            }
+            None => Bvh::new(&bvh_tris),
+        };
         let emitters: Vec<u32> = (0..tris.len() as u32)
             .filter(|&i| {
                 let t = &tris[i as usize];
@@ -274,34 +317,93 @@ impl Tracer {
             emitters,
             emitter_cdf,
             lights,
+            images: scene.images.clone(),
+            sky: scene.sky.clone().filter(|s| !s.is_dark()),
         })
     }
 
-    /// Whether anything emits: an emissive triangle or a punctual light.
+    /// Whether anything emits: an emissive triangle, a punctual light or a sky.
     pub fn has_emitters(&self) -> bool {
-        !self.emitters.is_empty() || self.lights.iter().any(|l| l.light.intensity > 0.0)
+        !self.emitters.is_empty()
+            || self.lights.iter().any(|l| l.light.intensity > 0.0)
+            || self.sky.is_some()
+    }
+
+    /// A texture's factor at point `x` (local frame) of triangle `tri`: the texel over the
+    /// texture's mean, per channel.
+    #[inline]
+    fn modulation(&self, tri: &Tri, x: DVec3, texture: &(TextureRef, [f64; 4])) -> [f64; 3] {
+        let (t, mean) = texture;
+        let b = barycentric([tri.v0, tri.v0 + tri.e1, tri.v0 + tri.e2], x);
+        let raw: [Vec2; 2] = std::array::from_fn(|set| {
+            let u = tri.uv[set];
+            (u[0].as_dvec2() * b[0] + u[1].as_dvec2() * b[1] + u[2].as_dvec2() * b[2]).as_vec2()
+        });
+        let texel = t.sample_linear(&self.images, t.uv(raw));
+        std::array::from_fn(|c| {
+            if mean[c] > 0.0 {
+                f64::from(texel[c]) / mean[c]
+            } else {
+                1.0
+            }
+        })
+    }
+
+    /// Reflectance at point `x` of triangle `tri`.
+    #[inline]
+    pub(crate) fn rho_at(&self, tri: &Tri, x: DVec3) -> [f64; 3] {
+        let m = &self.materials[tri.surface as usize];
+        match &m.rho_texture {
+            None => m.rho,
+            Some(t) => {
+                let k = self.modulation(tri, x, t);
+                std::array::from_fn(|c| (m.rho[c] * k[c]).clamp(0.0, 1.0))
+            }
+        }
+    }
+
+    /// Emitted radiance at point `x` of triangle `tri`.
+    #[inline]
+    pub(crate) fn emission_at(&self, tri: &Tri, x: DVec3) -> [f64; 3] {
+        let m = &self.materials[tri.surface as usize];
+        match &m.emission_texture {
+            None => m.emission,
+            Some(t) => {
+                let k = self.modulation(tri, x, t);
+                std::array::from_fn(|c| m.emission[c] * k[c])
+            }
+        }
+    }
+
+    /// The sky's radiance along `dir` (local frame directions are world directions).
+    #[inline]
+    pub(crate) fn sky(&self, dir: DVec3) -> [f64; 3] {
+        self.sky.as_ref().map_or([0.0; 3], |s| s.radiance(dir))
     }
 
     /// The closest front-facing hit of a ray from `origin` along unit `dir` (local frame):
     /// the triangle and the point. `None` on a miss or when the ray meets a back face.
     #[inline]
-    pub(crate) fn trace(&self, origin: DVec3, dir: DVec3) -> Option<(u32, DVec3)> {
-        let h = self
+    pub(crate) fn trace(&self, origin: DVec3, dir: DVec3) -> Found {
+        let Some(h) = self
             .bvh
-            .closest_hit(origin.as_vec3(), dir.as_vec3(), f32::INFINITY)?;
+            .closest_hit(origin.as_vec3(), dir.as_vec3(), f32::INFINITY)
+        else {
+            return Found::Escaped;
+        };
         let (index, twin) = (
             self.bvh_ids[h.triangle as usize],
             self.back_twin[h.triangle as usize],
         );
         let hit = match (h.front, twin) {
             (true, _) => index,
-            (false, u32::MAX) => return None,
+            (false, u32::MAX) => return Found::Absorbed,
             (false, twin) => twin,
         };
         let t = &self.tris[index as usize];
         // The point from the barycentrics, in f64, rather than origin + t·dir in f32.
         let (u, v) = (h.u.clamp(0.0, 1.0) as f64, h.v.clamp(0.0, 1.0) as f64);
-        Some((hit, t.v0 + t.e1 * u + t.e2 * v))
+        Found::Surface(hit, t.v0 + t.e1 * u + t.e2 * v)
     }
 
     fn clear(&self, a: DVec3, b: DVec3) -> bool {
@@ -382,7 +484,7 @@ impl Tracer {
                             let p_light = p_area * d2 / cy;
                             let p_bsdf = cx / PI;
                             let mis = p_light * p_light / (p_light * p_light + p_bsdf * p_bsdf);
-                            let le = &self.materials[t.surface as usize].emission;
+                            let le = self.emission_at(t, y);
                             // E = ∫ L cos_x dω = L cos_x / p_light; R = E/π.
                             let f = cx / (p_light * PI) * mis;
                             for c in 0..3 {
@@ -395,12 +497,22 @@ impl Tracer {
             // The next bounce, cosine-weighted: the estimator of R is the radiance it finds.
             let dir = cosine_direction(n, rng.f64(), rng.f64());
             *rays += 1;
-            let Some((hit, y)) = self.trace(x + n * OFFSET, dir) else {
-                break;
+            let (hit, y) = match self.trace(x + n * OFFSET, dir) {
+                Found::Surface(hit, y) => (hit, y),
+                Found::Absorbed => break,
+                Found::Escaped => {
+                    // The sky has no light sampling: the bounce sees it with weight 1.
+                    let l = self.sky(dir);
+                    for c in 0..3 {
+                        acc[c] += beta[c] * l[c];
+                    }
+                    break;
+                }
             };
             let t = &self.tris[hit as usize];
             let m = &self.materials[t.surface as usize];
             if power(&m.emission) > 0.0 && t.area > 0.0 {
+                let emission = self.emission_at(t, y);
                 let d2 = (y - x).length_squared();
                 let cy = -t.n.dot(dir);
                 let p_bsdf = n.dot(dir).max(0.0) / PI;
@@ -411,11 +523,12 @@ impl Tracer {
                     0.0
                 };
                 for c in 0..3 {
-                    acc[c] += beta[c] * m.emission[c] * mis;
+                    acc[c] += beta[c] * emission[c] * mis;
                 }
             }
+            let rho = self.rho_at(t, y);
             for c in 0..3 {
-                beta[c] *= m.rho[c];
+                beta[c] *= rho[c];
             }
             depth += 1;
             let bmax = beta[0].max(beta[1]).max(beta[2]);
@@ -441,13 +554,13 @@ impl Tracer {
     #[inline]
     pub(crate) fn outgoing(&self, tri: u32, x: DVec3, rng: &mut Rng, rays: &mut u64) -> [f64; 3] {
         let t = &self.tris[tri as usize];
-        let m = &self.materials[t.surface as usize];
-        let r = if m.rho.iter().any(|&p| p > 0.0) {
+        let (rho, emission) = (self.rho_at(t, x), self.emission_at(t, x));
+        let r = if rho.iter().any(|&p| p > 0.0) {
             self.reflected(x, t.n, rng, rays)
         } else {
             [0.0; 3]
         };
-        [0, 1, 2].map(|c| m.emission[c] + m.rho[c] * r[c])
+        [0, 1, 2].map(|c| emission[c] + rho[c] * r[c])
     }
 
     /// The triangle a point given in scene units lies on, seen along `normal`: the closest

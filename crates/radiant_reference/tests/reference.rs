@@ -69,11 +69,7 @@ fn double_sided_walls_reflect_on_the_side_a_ray_meets() {
     let mut scene = furnace(0.8, 1.0);
     let tris = scene.triangles.clone();
     for t in &tris {
-        let [a, b, c] = t.vertices;
-        scene.triangles.push(radiant_scene::Triangle {
-            vertices: [a, c, b],
-            surface: t.surface,
-        });
+        scene.triangles.push(t.rewound());
     }
     scene.triangles.push(tris[0]);
     let tracer = Tracer::new(&scene).expect("furnace");

@@ -4,11 +4,14 @@
 
 use std::path::Path;
 
-use glam::{DMat4, DVec3, DVec4};
+use glam::{DMat3, DMat4, DVec3, Vec2};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
 
-use crate::{Camera, Light, LightKind, Scene, SceneError, Surface, Triangle};
+use crate::texture::{Sampler, UvTransform, Wrap};
+use crate::{
+    AlphaMode, Camera, Image, Light, LightKind, Scene, SceneError, Surface, TextureRef, Triangle,
+};
 
 /// Loads a `.gltf` (with external or embedded buffers) or `.glb` file.
 pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
@@ -76,46 +79,27 @@ fn load(bytes: &[u8], base: Option<&Path>) -> Result<Scene, SceneError> {
         other => SceneError::Buffer(other.to_string()),
     })?;
     check_accessors(&document, &buffers)?;
-    // Images are only needed for base-colour texture means; a broken image is an error.
-    let needs_images = document
-        .materials()
-        .any(|m| m.pbr_metallic_roughness().base_color_texture().is_some());
-    let images = if needs_images {
-        // gltf 1.4.1 decodes an image's data URI only when given a base directory; without one
-        // (slice import) it refuses every URI image as an external reference. So, without a
-        // directory, refuse the truly external ones here and give it an empty base, which only
-        // data URIs then reach (no file is read).
-        let base = match base {
-            Some(dir) => dir,
-            None => {
-                if let Some(image) = document.images().find(|i| {
-                    matches!(i.source(), gltf::image::Source::Uri { uri, .. }
-                        if !uri.starts_with("data:"))
-                }) {
-                    return Err(SceneError::Invalid(format!(
-                        "image {}: external reference, but no directory to resolve it",
-                        image.index()
-                    )));
-                }
-                Path::new("")
-            }
-        };
-        gltf::import_images(&document, Some(base), &buffers)
-            .map_err(|e| SceneError::Invalid(format!("image: {e}")))?
-    } else {
-        Vec::new()
-    };
+    let (images, image_slot) = import_images(&document, base, &buffers)?;
 
     let mut importer = Importer {
         buffers: &buffers,
-        images: &images,
-        scene: Scene::default(),
+        image_slot: &image_slot,
+        scene: Scene {
+            images,
+            ..Scene::default()
+        },
         material_surfaces: Vec::new(),
     };
-    let roots: Vec<gltf::Node> = match document
+    let scene_def = document
         .default_scene()
-        .or_else(|| document.scenes().next())
+        .or_else(|| document.scenes().next());
+    if let Some(raw) = scene_def.as_ref().and_then(|s| s.extras().as_ref())
+        && let Ok(v) = serde_json::from_str::<serde_json::Value>(raw.get())
+        && let Some(sky) = v.get("radiant").and_then(|r| r.get("sky"))
     {
+        importer.scene.sky = crate::Sky::from_extras(sky, base)?;
+    }
+    let roots: Vec<gltf::Node> = match scene_def {
         Some(s) => s.nodes().collect(),
         None => {
             let mut is_child = vec![false; document.nodes().len()];
@@ -187,6 +171,160 @@ fn is_dynamic(node: &gltf::Node) -> bool {
         .ok()
         .and_then(|v| v.get("radiant")?.get("dynamic")?.as_bool())
         .unwrap_or(false)
+}
+
+/// Decodes the images that base-colour and emissive textures read (normal and other maps are
+/// not used), in parallel. Returns them and, per glTF image index, the slot in the scene's list.
+fn import_images(
+    document: &gltf::Document,
+    base: Option<&Path>,
+    buffers: &[gltf::buffer::Data],
+) -> Result<(Vec<Image>, Vec<u32>), SceneError> {
+    let mut used = vec![false; document.images().len()];
+    for m in document.materials() {
+        let tex = [
+            m.pbr_metallic_roughness()
+                .base_color_texture()
+                .map(|t| t.texture()),
+            m.emissive_texture().map(|t| t.texture()),
+        ];
+        for t in tex.into_iter().flatten() {
+            used[t.source().index()] = true;
+        }
+    }
+    let wanted: Vec<gltf::Image> = document.images().filter(|i| used[i.index()]).collect();
+    if wanted.is_empty() {
+        return Ok((Vec::new(), vec![u32::MAX; used.len()]));
+    }
+    let name_of = |i: &gltf::Image| match i.source() {
+        gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => uri.to_string(),
+        _ => i
+            .name()
+            .map_or_else(|| format!("image {}", i.index()), str::to_string),
+    };
+    // gltf 1.4.1 decodes an image's data URI only when given a base directory; without one
+    // (slice import) it refuses every URI image as an external reference. So, without a
+    // directory, refuse the truly external ones here and give it an empty base, which only
+    // data URIs then reach (no file is read).
+    let dir = match base {
+        Some(dir) => dir,
+        None => {
+            if let Some(image) = wanted.iter().find(|i| {
+                matches!(i.source(), gltf::image::Source::Uri { uri, .. }
+                    if !uri.starts_with("data:"))
+            }) {
+                return Err(SceneError::Texture {
+                    image: name_of(image),
+                    what: "external reference, but no directory to resolve it".into(),
+                });
+            }
+            Path::new("")
+        }
+    };
+    let decode = |image: &gltf::Image| -> Result<Image, SceneError> {
+        let name = name_of(image);
+        let data =
+            gltf::image::Data::from_source(image.source(), Some(dir), buffers).map_err(|e| {
+                SceneError::Texture {
+                    image: name.clone(),
+                    what: match e {
+                        gltf::Error::Io(io) => format!("cannot read it: {io}"),
+                        gltf::Error::Image(im) => format!("cannot decode it: {im}"),
+                        other => other.to_string(),
+                    },
+                }
+            })?;
+        to_rgba8(&name, &data)
+    };
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(wanted.len());
+    let mut decoded: Vec<Option<Result<Image, SceneError>>> = Vec::new();
+    decoded.resize_with(wanted.len(), || None);
+    std::thread::scope(|scope| {
+        let chunk = wanted.len().div_ceil(threads);
+        for (images, out) in wanted.chunks(chunk).zip(decoded.chunks_mut(chunk)) {
+            let decode = &decode;
+            scope.spawn(move || {
+                for (image, slot) in images.iter().zip(out) {
+                    *slot = Some(decode(image));
+                }
+            });
+        }
+    });
+    let mut slot = vec![u32::MAX; used.len()];
+    let mut images = Vec::with_capacity(wanted.len());
+    for (image, result) in wanted.iter().zip(decoded) {
+        let result = result.unwrap_or_else(|| {
+            Err(SceneError::Texture {
+                image: name_of(image),
+                what: "its decoder thread stopped".into(),
+            })
+        });
+        slot[image.index()] = images.len() as u32;
+        images.push(result?);
+    }
+    Ok((images, slot))
+}
+
+/// Any decoded glTF image as 8-bit RGBA (16-bit and float channels scaled, grey replicated).
+fn to_rgba8(name: &str, img: &gltf::image::Data) -> Result<Image, SceneError> {
+    use gltf::image::Format;
+    let (channels, bytes) = match img.format {
+        Format::R8 => (1, 1),
+        Format::R8G8 => (2, 1),
+        Format::R8G8B8 => (3, 1),
+        Format::R8G8B8A8 => (4, 1),
+        Format::R16 => (1, 2),
+        Format::R16G16 => (2, 2),
+        Format::R16G16B16 => (3, 2),
+        Format::R16G16B16A16 => (4, 2),
+        Format::R32G32B32FLOAT => (3, 4),
+        Format::R32G32B32A32FLOAT => (4, 4),
+    };
+    let texels = img.width as usize * img.height as usize;
+    if img.pixels.len() < texels * channels * bytes || texels == 0 {
+        return Err(SceneError::Texture {
+            image: name.to_string(),
+            what: format!(
+                "{}×{} texels but {} bytes",
+                img.width,
+                img.height,
+                img.pixels.len()
+            ),
+        });
+    }
+    let read = |k: usize| -> u8 {
+        let at = k * bytes;
+        match bytes {
+            1 => img.pixels[at],
+            2 => img.pixels[at + 1], // little-endian: the high byte
+            _ => {
+                let v = f32::from_le_bytes([
+                    img.pixels[at],
+                    img.pixels[at + 1],
+                    img.pixels[at + 2],
+                    img.pixels[at + 3],
+                ]);
+                (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
+            }
+        }
+    };
+    let mut out = Vec::with_capacity(texels * 4);
+    for p in 0..texels {
+        let k = p * channels;
+        let px = match channels {
+            1 => [read(k), read(k), read(k), 255],
+            2 => [read(k), read(k), read(k), read(k + 1)],
+            3 => [read(k), read(k + 1), read(k + 2), 255],
+            _ => [read(k), read(k + 1), read(k + 2), read(k + 3)],
+        };
+        out.extend(px);
+    }
+    Image::new(name, img.width, img.height, out).ok_or_else(|| SceneError::Texture {
+        image: name.to_string(),
+        what: "size does not match its texels".into(),
+    })
 }
 
 /// gltf-json's validation indexes the accessor array with each primitive's POSITION index
@@ -316,18 +454,89 @@ fn check_accessors(doc: &gltf::Document, buffers: &[gltf::buffer::Data]) -> Resu
     Ok(())
 }
 
-/// Reflectance, emission and name of a material.
-type MaterialValues = ([f64; 3], [f64; 3], String);
+/// What a material gives its surfaces.
+#[derive(Clone)]
+struct MaterialValues {
+    name: String,
+    reflectance: [f64; 3],
+    emission: [f64; 3],
+    base_color_texture: Option<TextureRef>,
+    base_color_alpha: f64,
+    emissive_texture: Option<TextureRef>,
+    alpha: AlphaMode,
+    double_sided: bool,
+}
 
 struct Importer<'a> {
     buffers: &'a [gltf::buffer::Data],
-    images: &'a [gltf::image::Data],
+    /// Per glTF image index: its slot in `scene.images` (`u32::MAX` when not decoded).
+    image_slot: &'a [u32],
     scene: Scene,
     /// Materials already read, by glTF material index.
     material_surfaces: Vec<(Option<usize>, MaterialValues)>,
 }
 
 impl Importer<'_> {
+    fn texture(
+        &self,
+        material: &str,
+        info: &gltf::texture::Info,
+    ) -> Result<TextureRef, SceneError> {
+        use gltf::texture::{MagFilter, WrappingMode};
+        let tex = info.texture();
+        let image = self
+            .image_slot
+            .get(tex.source().index())
+            .copied()
+            .filter(|&s| s != u32::MAX)
+            .ok_or_else(|| SceneError::Texture {
+                image: format!("image {}", tex.source().index()),
+                what: format!("material '{material}' reads it, but it was not decoded"),
+            })?;
+        let wrap = |w: WrappingMode| match w {
+            WrappingMode::Repeat => Wrap::Repeat,
+            WrappingMode::MirroredRepeat => Wrap::MirroredRepeat,
+            WrappingMode::ClampToEdge => Wrap::ClampToEdge,
+        };
+        let sampler = tex.sampler();
+        let transform = info.texture_transform();
+        let tex_coord = transform
+            .as_ref()
+            .and_then(|t| t.tex_coord())
+            .unwrap_or(info.tex_coord());
+        if tex_coord > 1 {
+            return Err(SceneError::Unsupported(format!(
+                "material '{material}': a texture reads TEXCOORD_{tex_coord} (0 and 1 are read)"
+            )));
+        }
+        let transform = transform.map_or_else(UvTransform::default, |t| UvTransform {
+            offset: t.offset(),
+            rotation: t.rotation(),
+            scale: t.scale(),
+        });
+        if !(transform
+            .offset
+            .iter()
+            .chain(&transform.scale)
+            .all(|v| v.is_finite())
+            && transform.rotation.is_finite())
+        {
+            return Err(SceneError::Invalid(format!(
+                "material '{material}': KHR_texture_transform is not finite"
+            )));
+        }
+        Ok(TextureRef {
+            image,
+            sampler: Sampler {
+                wrap_s: wrap(sampler.wrap_s()),
+                wrap_t: wrap(sampler.wrap_t()),
+                nearest: sampler.mag_filter() == Some(MagFilter::Nearest),
+            },
+            tex_coord: tex_coord as u8,
+            transform,
+        })
+    }
+
     fn material(&mut self, m: &gltf::Material) -> Result<MaterialValues, SceneError> {
         if let Some(hit) = self.material_surfaces.iter().find(|c| c.0 == m.index()) {
             return Ok(hit.1.clone());
@@ -342,7 +551,8 @@ impl Importer<'_> {
         let pbr = m.pbr_metallic_roughness();
         let base = pbr.base_color_factor();
         let mut rho = [base[0], base[1], base[2]].map(f64::from);
-        for &v in &rho {
+        let base_color_alpha = f64::from(base[3]);
+        for &v in rho.iter().chain([base_color_alpha].iter()) {
             if !v.is_finite() || !(0.0..=1.0).contains(&v) {
                 return Err(SceneError::ReflectanceOutOfRange {
                     material: name,
@@ -350,17 +560,19 @@ impl Importer<'_> {
                 });
             }
         }
-        if let Some(tex) = pbr.base_color_texture() {
-            let index = tex.texture().source().index();
-            if let Some(mean) = self.images.get(index).and_then(texture_mean) {
-                for (r, t) in rho.iter_mut().zip(mean) {
-                    *r *= t;
-                }
+        let base_color_texture = match pbr.base_color_texture() {
+            Some(info) => Some(self.texture(&name, &info)?),
+            None => None,
+        };
+        if let Some(t) = base_color_texture {
+            let mean = self.scene.images[t.image as usize].mean_linear();
+            for (r, t) in rho.iter_mut().zip(mean) {
+                *r *= t;
             }
         }
         let strength = f64::from(m.emissive_strength().unwrap_or(1.0));
         let ef = m.emissive_factor().map(f64::from);
-        let emission = ef.map(|e| e * strength);
+        let mut emission = ef.map(|e| e * strength);
         for &v in ef.iter().chain([strength].iter()).chain(emission.iter()) {
             if !v.is_finite() || v < 0.0 {
                 return Err(SceneError::InvalidEmission {
@@ -369,9 +581,41 @@ impl Importer<'_> {
                 });
             }
         }
-        self.material_surfaces
-            .push((m.index(), (rho, emission, name.clone())));
-        Ok((rho, emission, name))
+        let emissive_texture = match m.emissive_texture() {
+            Some(info) => Some(self.texture(&name, &info)?),
+            None => None,
+        };
+        if let Some(t) = emissive_texture {
+            let mean = self.scene.images[t.image as usize].mean_linear();
+            for (e, t) in emission.iter_mut().zip(mean) {
+                *e *= t;
+            }
+        }
+        let alpha = match m.alpha_mode() {
+            gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
+            gltf::material::AlphaMode::Blend => AlphaMode::Blend,
+            gltf::material::AlphaMode::Mask => {
+                let cutoff = f64::from(m.alpha_cutoff().unwrap_or(0.5));
+                if !cutoff.is_finite() || cutoff < 0.0 {
+                    return Err(SceneError::Invalid(format!(
+                        "material '{name}': alphaCutoff {cutoff} is negative or not finite"
+                    )));
+                }
+                AlphaMode::Mask { cutoff }
+            }
+        };
+        let values = MaterialValues {
+            name,
+            reflectance: rho,
+            emission,
+            base_color_texture,
+            base_color_alpha,
+            emissive_texture,
+            alpha,
+            double_sided: m.double_sided(),
+        };
+        self.material_surfaces.push((m.index(), values.clone()));
+        Ok(values)
     }
 
     fn mesh(
@@ -470,31 +714,94 @@ impl Importer<'_> {
                     .map(|i| [indices[0], indices[i - 1], indices[i]])
                     .collect(),
             };
-            let (reflectance, emission, material) = self.material(&prim.material())?;
-            let double_sided = prim.material().double_sided();
+            let m = self.material(&prim.material())?;
+            // Shading normals: the inverse transpose of the node's linear part; the face normal
+            // where the primitive has none (or a degenerate one).
+            let normal_matrix = DMat3::from_mat4(world).inverse().transpose();
+            let normals: Option<Vec<DVec3>> = reader.read_normals().map(|ns| {
+                ns.map(|n| {
+                    let n = DVec3::new(n[0].into(), n[1].into(), n[2].into());
+                    (normal_matrix * n).normalize_or_zero()
+                })
+                .collect()
+            });
+            let mut uvs: [Option<Vec<Vec2>>; 2] = [None, None];
+            for (set, slot) in uvs.iter_mut().enumerate() {
+                *slot = reader
+                    .read_tex_coords(set as u32)
+                    .map(|tc| tc.into_f32().map(Vec2::from).collect());
+            }
+            for (texture, t) in [
+                ("base colour", m.base_color_texture),
+                ("emissive", m.emissive_texture),
+            ] {
+                if let Some(t) = t
+                    && uvs[usize::from(t.tex_coord)]
+                        .as_ref()
+                        .is_none_or(|uv| uv.len() < verts.len())
+                {
+                    return Err(SceneError::MissingTexCoord {
+                        mesh: name,
+                        texture,
+                        set: t.tex_coord,
+                    });
+                }
+            }
+            if let Some(uv) = uvs.iter().flatten().find(|uv| uv.len() < verts.len()) {
+                return Err(SceneError::Invalid(format!(
+                    "mesh '{name}': {} texture coordinates for {} vertices",
+                    uv.len(),
+                    verts.len()
+                )));
+            }
             let surface = self.scene.surfaces.len() as u32;
             self.scene.surfaces.push(Surface {
                 name,
-                material,
-                reflectance,
-                emission,
+                material: m.name,
+                reflectance: m.reflectance,
+                emission: m.emission,
                 dynamic,
+                base_color_texture: m.base_color_texture,
+                base_color_alpha: m.base_color_alpha,
+                emissive_texture: m.emissive_texture,
+                alpha: m.alpha,
+                double_sided: m.double_sided,
+                tex_coords: uvs.iter().take_while(|u| u.is_some()).count() as u8,
             });
-            for [a, b, c] in tris {
-                let (a, b, c) = (verts[a as usize], verts[b as usize], verts[c as usize]);
-                let vertices = if flip { [a, c, b] } else { [a, b, c] };
-                let t = Triangle { vertices, surface };
+            for corners in tris {
+                let corners = if flip {
+                    [corners[0], corners[2], corners[1]]
+                } else {
+                    corners
+                };
+                let mut t = Triangle::new(corners.map(|i| verts[i as usize]), surface);
                 if is_degenerate(&t) {
                     self.scene.stats.degenerate_triangles += 1;
                     continue;
                 }
-                self.scene.triangles.push(t);
-                if double_sided {
-                    let [a, b, c] = vertices;
-                    self.scene.triangles.push(Triangle {
-                        vertices: [a, c, b],
-                        surface,
+                if let Some(ns) = &normals {
+                    let face = t.normals[0];
+                    t.normals = corners.map(|i| {
+                        let n = ns[i as usize].as_vec3();
+                        // A zero or non-finite normal, or one facing away from the front, is replaced.
+                        if n.is_finite() && n.dot(face) > 0.0 {
+                            n
+                        } else {
+                            face
+                        }
                     });
+                }
+                for (set, uv) in uvs.iter().enumerate() {
+                    if let Some(uv) = uv {
+                        t.uv[set] = corners.map(|i| uv[i as usize]);
+                    }
+                }
+                self.scene.triangles.push(t);
+                if m.double_sided {
+                    // The back: reversed winding, normals flipped, the same texture points.
+                    let mut back = t.rewound();
+                    back.normals = back.normals.map(|n| -n);
+                    self.scene.triangles.push(back);
                 }
             }
         }
@@ -582,27 +889,4 @@ fn is_degenerate(t: &Triangle) -> bool {
         .max((a - c).length_squared());
     let cross = t.cross().length();
     cross.partial_cmp(&(1e-12 * longest)) != Some(std::cmp::Ordering::Greater) || !cross.is_finite()
-}
-
-/// Mean linear colour of an 8-bit sRGB texture; `None` for formats it does not read.
-fn texture_mean(img: &gltf::image::Data) -> Option<[f64; 3]> {
-    use gltf::image::Format;
-    let channels = match img.format {
-        Format::R8G8B8 => 3,
-        Format::R8G8B8A8 => 4,
-        _ => return None,
-    };
-    let lut: Vec<f64> = (0..256)
-        .map(|i| radiant_color::srgb_to_linear(i as f64 / 255.0))
-        .collect();
-    let mut sum = DVec4::ZERO;
-    for px in img.pixels.chunks_exact(channels) {
-        sum += DVec4::new(
-            lut[px[0] as usize],
-            lut[px[1] as usize],
-            lut[px[2] as usize],
-            1.0,
-        );
-    }
-    (sum.w > 0.0).then(|| [sum.x / sum.w, sum.y / sum.w, sum.z / sum.w])
 }

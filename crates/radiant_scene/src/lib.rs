@@ -11,9 +11,13 @@
 //! ```
 
 mod gltf_import;
+pub mod sky;
+pub mod texture;
 
-use glam::DVec3;
+use glam::{DVec3, Vec2, Vec3};
 pub use gltf_import::{load_gltf, load_gltf_slice};
+pub use sky::Sky;
+pub use texture::{AlphaMasks, Image, TextureRef};
 
 /// The Cornell box as published by Cornell's PCG, in metres, `bitterli` RGB materials.
 ///
@@ -106,6 +110,29 @@ pub enum SceneError {
         /// What is wrong.
         what: String,
     },
+    /// A texture's image is missing, unreadable or undecodable.
+    #[error("image '{image}': {what}")]
+    Texture {
+        /// The image's URI or index.
+        image: String,
+        /// What is wrong.
+        what: String,
+    },
+    /// A material's texture reads a TEXCOORD set the primitive does not have.
+    #[error(
+        "mesh '{mesh}': its material's {texture} texture reads TEXCOORD_{set}, which the primitive lacks"
+    )]
+    MissingTexCoord {
+        /// The surface name.
+        mesh: String,
+        /// Which texture (base colour, emissive).
+        texture: &'static str,
+        /// The TEXCOORD set.
+        set: u8,
+    },
+    /// A sky description that cannot be used.
+    #[error("sky: {0}")]
+    InvalidSky(String),
     /// No builtin scene of that name.
     #[error("no builtin scene '{0}' (known: cornell-box)")]
     UnknownBuiltin(String),
@@ -125,6 +152,52 @@ pub struct Surface {
     /// Not part of the bake (neither receiver nor occluder): a glTF node whose extras hold
     /// `{"radiant": {"dynamic": true}}`. Surfaces are static by default.
     pub dynamic: bool,
+    /// The base-colour texture, if any. [`Surface::reflectance`] is the factor times its mean;
+    /// the bake gives each element the factor times the mean over its own UV footprint.
+    pub base_color_texture: Option<TextureRef>,
+    /// The base colour factor's alpha (glTF `baseColorFactor[3]`).
+    pub base_color_alpha: f64,
+    /// The emissive texture, if any; [`Surface::emission`] includes its mean likewise.
+    pub emissive_texture: Option<TextureRef>,
+    /// glTF `alphaMode`: masked triangles let light through where their alpha is cut.
+    pub alpha: AlphaMode,
+    /// glTF `doubleSided`: the importer adds a back-facing twin of every triangle.
+    pub double_sided: bool,
+    /// How many TEXCOORD sets the primitive has (0, 1 or 2).
+    pub tex_coords: u8,
+}
+
+impl Default for Surface {
+    fn default() -> Self {
+        Surface {
+            name: String::new(),
+            material: String::new(),
+            reflectance: [0.0; 3],
+            emission: [0.0; 3],
+            dynamic: false,
+            base_color_texture: None,
+            base_color_alpha: 1.0,
+            emissive_texture: None,
+            alpha: AlphaMode::Opaque,
+            double_sided: false,
+            tex_coords: 0,
+        }
+    }
+}
+
+/// glTF `alphaMode`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum AlphaMode {
+    /// Alpha is ignored.
+    #[default]
+    Opaque,
+    /// Opaque where alpha ≥ `cutoff`, absent elsewhere.
+    Mask {
+        /// glTF `alphaCutoff` (default 0.5).
+        cutoff: f64,
+    },
+    /// Blending. Radiant's bake and renderer treat it as a mask at 0.5 (no partial coverage).
+    Blend,
 }
 
 impl Surface {
@@ -135,15 +208,45 @@ impl Surface {
 }
 
 /// A triangle in world space; counter-clockwise seen from its lit (front) side.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Triangle {
     /// The three vertices in world space (scene units).
     pub vertices: [DVec3; 3],
     /// Index into [`Scene::surfaces`].
     pub surface: u32,
+    /// Unit shading normals at the vertices, world space, on the front side (the face normal
+    /// where the glTF has none).
+    pub normals: [Vec3; 3],
+    /// Texture coordinates per vertex: `uv[0]` is TEXCOORD_0, `uv[1]` TEXCOORD_1 (zero where the
+    /// primitive lacks the set, see [`Surface::tex_coords`]).
+    pub uv: [[Vec2; 3]; 2],
 }
 
 impl Triangle {
+    /// A flat triangle: face normals at its vertices, no texture coordinates.
+    pub fn new(vertices: [DVec3; 3], surface: u32) -> Triangle {
+        let mut t = Triangle {
+            vertices,
+            surface,
+            ..Triangle::default()
+        };
+        t.normals = [t.cross().normalize_or_zero().as_vec3(); 3];
+        t
+    }
+
+    /// The same triangle with vertices 1 and 2 (and their normals and UVs) swapped: the other
+    /// winding. Normals are not negated.
+    pub fn rewound(&self) -> Triangle {
+        let swap = |[a, b, c]: [Vec3; 3]| [a, c, b];
+        let [a, b, c] = self.vertices;
+        Triangle {
+            vertices: [a, c, b],
+            surface: self.surface,
+            normals: swap(self.normals),
+            uv: self.uv.map(|[a, b, c]| [a, c, b]),
+        }
+    }
+
     /// The area-weighted normal (cross product of two edges); its length is twice the area.
     pub fn cross(&self) -> DVec3 {
         let [a, b, c] = self.vertices;
@@ -260,14 +363,20 @@ pub struct Scene {
     pub lights: Vec<Light>,
     /// The first camera found, if any.
     pub camera: Option<Camera>,
+    /// Images the surfaces' textures read, decoded.
+    pub images: Vec<Image>,
+    /// Light from outside the scene, if any.
+    pub sky: Option<Sky>,
     /// What import skipped.
     pub stats: ImportStats,
 }
 
 impl Scene {
-    /// Whether anything emits light: an emissive surface with triangles, or a punctual light.
+    /// Whether anything emits light: an emissive surface with triangles, a punctual light, or
+    /// a sky that is not dark.
     pub fn has_emitters(&self) -> bool {
         !self.lights.is_empty()
+            || self.sky.as_ref().is_some_and(|s| !s.is_dark())
             || self
                 .triangles
                 .iter()

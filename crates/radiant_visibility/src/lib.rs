@@ -17,6 +17,7 @@
 //! assert!((hit.t - 1.0).abs() < 1e-6);
 //! ```
 
+use std::sync::Arc;
 use std::time::Duration;
 
 use glam::{Vec3, Vec3A};
@@ -48,6 +49,20 @@ pub trait Visibility: Send + Sync {
     /// The closest hit of the ray `origin + t * dir` for `t` in `(tmin, tmax]`, tmin a tiny
     /// relative offset.
     fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit>;
+}
+
+/// Decides whether a hit counts. Alpha masks implement it: a ray passes a masked triangle
+/// where its texture's alpha is cut.
+pub trait HitFilter: Send + Sync {
+    /// Whether a hit on `triangle` (the constructor's index) at barycentrics `(u, v)` (weights of
+    /// vertices 1 and 2) blocks the ray.
+    fn blocks(&self, triangle: u32, u: f32, v: f32) -> bool;
+}
+
+impl<F: Fn(u32, f32, f32) -> bool + Send + Sync> HitFilter for F {
+    fn blocks(&self, triangle: u32, u: f32, v: f32) -> bool {
+        self(triangle, u, v)
+    }
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -151,16 +166,47 @@ pub struct Bvh {
     tris: Vec<Tri>,
     /// BVH order → caller's index.
     ids: Vec<u32>,
+    /// The hit filter and, in BVH order, which triangles it is asked about.
+    filter: Option<(Arc<dyn HitFilter>, Vec<bool>)>,
 }
 
 impl Bvh {
     /// Builds the BVH. An empty input gives a BVH that never hits.
     pub fn new(triangles: &[[Vec3; 3]]) -> Self {
+        Self::build(triangles)
+    }
+
+    /// Builds the BVH with a hit filter, asked only about the triangles `filtered` marks (by
+    /// the caller's index): every other hit blocks as usual, at no extra cost.
+    pub fn with_filter(
+        triangles: &[[Vec3; 3]],
+        filtered: impl Fn(u32) -> bool,
+        filter: Arc<dyn HitFilter>,
+    ) -> Self {
+        let mut bvh = Self::build(triangles);
+        let marks: Vec<bool> = bvh.ids.iter().map(|&i| filtered(i)).collect();
+        if marks.iter().any(|&m| m) {
+            bvh.filter = Some((filter, marks));
+        }
+        bvh
+    }
+
+    /// Whether the hit on BVH-order triangle `id` at `(u, v)` counts.
+    #[inline(always)]
+    fn counts(&self, id: usize, u: f32, v: f32) -> bool {
+        match &self.filter {
+            Some((f, marks)) if marks[id] => f.blocks(self.ids[id], u, v),
+            _ => true,
+        }
+    }
+
+    fn build(triangles: &[[Vec3; 3]]) -> Self {
         if triangles.is_empty() {
             return Bvh {
                 bvh: Bvh2::default(),
                 tris: Vec::new(),
                 ids: Vec::new(),
+                filter: None,
             };
         }
         let obvhs_tris: Vec<obvhs::triangle::Triangle> = triangles
@@ -181,7 +227,12 @@ impl Bvh {
             .iter()
             .map(|&i| Tri::new(&triangles[i as usize]))
             .collect();
-        Bvh { bvh, tris, ids }
+        Bvh {
+            bvh,
+            tris,
+            ids,
+            filter: None,
+        }
     }
 }
 
@@ -193,9 +244,10 @@ impl Visibility for Bvh {
         let (o, d) = (Vec3A::from(a), Vec3A::from(b - a));
         let ray = Ray::new(o, d, SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON);
         self.bvh.ray_traverse_miss(ray, |r, id| {
-            self.tris[id]
-                .intersect(r.origin, r.direction, r.tmin, r.tmax)
-                .map_or(f32::INFINITY, |h| h.0)
+            match self.tris[id].intersect(r.origin, r.direction, r.tmin, r.tmax) {
+                Some((t, u, v, _)) if self.counts(id, u, v) => t,
+                _ => f32::INFINITY,
+            }
         })
     }
 
@@ -209,13 +261,13 @@ impl Visibility for Bvh {
         let mut best: Option<(f32, f32, f32, bool, usize)> = None;
         self.bvh.ray_traverse(ray, &mut hit, |r, id| {
             match self.tris[id].intersect(r.origin, r.direction, r.tmin, r.tmax) {
-                Some((t, u, v, front)) => {
+                Some((t, u, v, front)) if self.counts(id, u, v) => {
                     if best.is_none_or(|b| t < b.0) {
                         best = Some((t, u, v, front, id));
                     }
                     t
                 }
-                None => f32::INFINITY,
+                _ => f32::INFINITY,
             }
         });
         best.map(|(t, u, v, front, id)| Hit {
@@ -313,5 +365,34 @@ mod tests {
         let bvh = Bvh::new(&[]);
         assert!(bvh.segment_clear(Vec3::ZERO, Vec3::ONE));
         assert!(bvh.closest_hit(Vec3::ZERO, Vec3::ONE, 1.0).is_none());
+    }
+
+    #[test]
+    fn a_filter_lets_rays_through_where_it_says() {
+        // Two stacked floors; the upper one (index 0) is cut where u > v (barycentrics).
+        let upper = [
+            Vec3::new(-1., 1., -1.),
+            Vec3::new(1., 1., -1.),
+            Vec3::new(0., 1., 1.),
+        ];
+        let lower = [
+            Vec3::new(-1., 0., -1.),
+            Vec3::new(1., 0., -1.),
+            Vec3::new(0., 0., 1.),
+        ];
+        let bvh = Bvh::with_filter(
+            &[upper, lower],
+            |t| t == 0,
+            Arc::new(|_t: u32, u: f32, v: f32| u <= v),
+        );
+        let down = Vec3::NEG_Y;
+        // x > 0 is towards vertex 1 (u large): cut, so the lower floor is hit.
+        let cut = bvh.closest_hit(Vec3::new(0.5, 2., -0.5), down, f32::INFINITY);
+        assert_eq!(cut.map(|h| h.triangle), Some(1));
+        let kept = bvh.closest_hit(Vec3::new(-0.3, 2., 0.2), down, f32::INFINITY);
+        assert_eq!(kept.map(|h| h.triangle), Some(0));
+        assert!(!bvh.segment_clear(Vec3::new(0.5, 2., -0.5), Vec3::new(0.5, -1., -0.5)));
+        assert!(bvh.segment_clear(Vec3::new(0.5, 2., -0.5), Vec3::new(0.5, 0.5, -0.5)));
+        assert!(!bvh.segment_clear(Vec3::new(-0.3, 2., 0.2), Vec3::new(-0.3, 0.5, 0.2)));
     }
 }

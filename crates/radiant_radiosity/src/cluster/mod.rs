@@ -36,13 +36,13 @@ use std::time::{Duration, Instant};
 use radiant_scene::Scene;
 use radiant_visibility::Bvh;
 
+use crate::BakeError;
 use crate::bake::{BakeParams, BakeReport, BakeResult, PhaseTimes, TimelinePoint};
 use crate::form_factors::FormFactorKind;
 use crate::mesh::Mesh;
 use crate::metrics::surface_means;
 use crate::solvers::SolverKind;
 use crate::system::{Rgb, System};
-use crate::{BakeError, lights};
 
 /// Settings of the clustered hierarchy that the per-triangle bake does not have.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -192,7 +192,7 @@ pub fn bake(
     budget.reserve("the ray-tracing BVH", mesh.roots.len() as u64 * 160)?;
     times.meshing = lap.elapsed().as_secs_f64();
     lap = Instant::now();
-    let bvh = Bvh::new(&mesh.root_triangles_f32());
+    let bvh = crate::input::visibility(&mesh, crate::input::masks(scene).as_ref());
     let tree = tree::Tree::new(&mesh);
     times.visibility = lap.elapsed().as_secs_f64();
     tracing::info!(
@@ -203,21 +203,12 @@ pub fn bake(
     );
 
     lap = Instant::now();
-    let mut rho = Vec::with_capacity(n);
-    let mut source = Vec::with_capacity(n);
-    for &id in &mesh.leaves {
-        let s = &scene.surfaces[mesh.root_surface[mesh.nodes[id as usize].root as usize] as usize];
-        rho.push(s.reflectance);
-        source.push(s.emission);
-    }
-    if !scene.lights.is_empty() {
-        let direct = lights::direct_irradiance(&mesh, &scene.lights, &bvh);
-        for i in 0..n {
-            for c in 0..3 {
-                source[i][c] += rho[i][c] * direct[i][c] / std::f64::consts::PI;
-            }
-        }
-    }
+    let textures = crate::input::element_textures(scene, &mesh);
+    let (rho, emission) = crate::input::materials(&scene.surfaces, &mesh, textures.as_ref());
+    let direct =
+        crate::input::direct_irradiance(&scene.lights, scene.sky.as_ref(), &mesh, &bvh, &params.ff);
+    let source = crate::input::sources(&rho, &emission, direct.as_deref());
+    drop(direct);
     times.direct_light = lap.elapsed().as_secs_f64();
     let mut warnings = scene.warnings();
     let has_emitters = source.iter().any(|s| s.iter().any(|&v| v > 0.0));

@@ -74,6 +74,8 @@ pub struct FormFactorParams {
     /// Ray-cast: minimum sample points per source node; nodes that subtend more get up to 256
     /// (default: 4).
     pub ray_cast_samples: u32,
+    /// Sky light: rays per element, stratified (default: 64).
+    pub sky_rays: u32,
     /// Seed for every random choice; results depend on nothing else (default: 1).
     pub seed: u64,
 }
@@ -84,6 +86,7 @@ impl Default for FormFactorParams {
             hemicube_resolution: 128,
             monte_carlo_rays: 256,
             ray_cast_samples: 4,
+            sky_rays: 64,
             seed: 1,
         }
     }

@@ -1,0 +1,250 @@
+//! The bake's input, scene → per-element terms, shared by every bake path (per-triangle,
+//! clustered, edits):
+//!
+//! - [`visibility`]: the BVH over the input triangles, with the scene's alpha masks (a ray passes
+//!   a masked triangle where its alpha is below the cutoff, in every query);
+//! - [`ElementTextures`]: per element, how its own UV footprint's texture mean differs from the
+//!   whole texture's (the surface's reflectance and emission hold the whole texture's mean, so a
+//!   colour edit scales them and the footprints stay);
+//! - [`materials`]: per-element reflectance and emission;
+//! - [`direct_irradiance`]: light that arrives without a bounce from the punctual lights
+//!   ([`crate::lights`]) and the sky ([`sky_irradiance`]), shadowed;
+//! - [`sources`]: `S = E + ρ · E_direct / π`.
+
+use std::sync::Arc;
+
+use glam::{DVec3, Vec2};
+use radiant_scene::texture::{Pyramid, barycentric};
+use radiant_scene::{AlphaMasks, Light, Scene, Sky, Surface, TextureRef};
+use radiant_visibility::{Bvh, Visibility};
+use rayon::prelude::*;
+
+use crate::Rgb;
+use crate::mesh::Mesh;
+
+/// The alpha masks of the scene's triangles, `None` when nothing is masked.
+pub fn masks(scene: &Scene) -> Option<Arc<AlphaMasks>> {
+    let masks = AlphaMasks::new(scene)?;
+    let [opaque, cut, mixed] = masks.counts;
+    tracing::info!(
+        opaque,
+        cut,
+        mixed,
+        "alpha masks: triangles of masked surfaces wholly opaque, wholly cut and mixed"
+    );
+    Some(Arc::new(masks))
+}
+
+/// The BVH over the mesh's input triangles (the scene's, in order), with alpha masks.
+pub fn visibility(mesh: &Mesh, masks: Option<&Arc<AlphaMasks>>) -> Bvh {
+    let tris = mesh.root_triangles_f32();
+    match masks {
+        Some(masks) => {
+            let (marks, masks) = (Arc::clone(masks), Arc::clone(masks));
+            Bvh::with_filter(
+                &tris,
+                move |t| marks.is_masked(t),
+                Arc::new(move |t, u, v| masks.blocks(t, u, v)),
+            )
+        }
+        None => Bvh::new(&tris),
+    }
+}
+
+/// Per element: its UV footprint's texture mean over the whole texture's, per channel, for
+/// reflectance and emission (1 where a surface has no texture).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ElementTextures {
+    /// Multiplies the surface's reflectance.
+    pub reflectance: Vec<Rgb>,
+    /// Multiplies the surface's emission.
+    pub emission: Vec<Rgb>,
+}
+
+/// The footprints of `scene`'s textures on `mesh`'s elements, or `None` when no surface has a
+/// texture (nothing to compute).
+pub fn element_textures(scene: &Scene, mesh: &Mesh) -> Option<ElementTextures> {
+    let textured = |s: &Surface| s.base_color_texture.is_some() || s.emissive_texture.is_some();
+    if !scene.surfaces.iter().any(textured) || mesh.roots.len() != scene.triangles.len() {
+        return None;
+    }
+    // One pyramid per image a texture reads, built in parallel.
+    let mut used = vec![false; scene.images.len()];
+    for s in &scene.surfaces {
+        for t in [s.base_color_texture, s.emissive_texture]
+            .into_iter()
+            .flatten()
+        {
+            if let Some(u) = used.get_mut(t.image as usize) {
+                *u = true;
+            }
+        }
+    }
+    let pyramids: Vec<Option<(Pyramid, [f64; 4])>> = scene
+        .images
+        .par_iter()
+        .zip(used)
+        .map(|(img, u)| u.then(|| (Pyramid::new(img), img.mean_linear())))
+        .collect();
+    let n = mesh.element_count();
+    let mut out = ElementTextures {
+        reflectance: vec![[1.0; 3]; n],
+        emission: vec![[1.0; 3]; n],
+    };
+    let ratio = |t: &TextureRef, tri: &radiant_scene::Triangle, corners: [[f64; 3]; 3]| {
+        let Some(Some((pyramid, mean))) = pyramids.get(t.image as usize) else {
+            return [1.0; 3];
+        };
+        let uv = corners.map(|b| {
+            let raw: [Vec2; 2] = std::array::from_fn(|set| {
+                let u = tri.uv[set];
+                (u[0].as_dvec2() * b[0] + u[1].as_dvec2() * b[1] + u[2].as_dvec2() * b[2]).as_vec2()
+            });
+            t.uv(raw)
+        });
+        let m = pyramid.footprint_mean(t.sampler, uv);
+        std::array::from_fn(|c| if mean[c] > 0.0 { m[c] / mean[c] } else { 1.0 })
+    };
+    out.reflectance
+        .par_iter_mut()
+        .zip(out.emission.par_iter_mut())
+        .enumerate()
+        .with_min_len(256)
+        .for_each(|(leaf, (rho, emit))| {
+            let node = mesh.leaf_node(leaf as u32);
+            let root = node.root as usize;
+            let (Some(tri), Some(&root_node)) = (scene.triangles.get(root), mesh.roots.get(root))
+            else {
+                return;
+            };
+            let Some(s) = scene.surfaces.get(tri.surface as usize) else {
+                return;
+            };
+            if !textured(s) {
+                return;
+            }
+            // The element's corners as barycentrics of its input triangle (both in the local
+            // frame), then as texture coordinates.
+            let rv = mesh.nodes[root_node as usize].v;
+            let corners = node.v.map(|p| barycentric(rv, p));
+            if let Some(t) = &s.base_color_texture {
+                *rho = ratio(t, tri, corners);
+            }
+            if let Some(t) = &s.emissive_texture {
+                *emit = ratio(t, tri, corners);
+            }
+        });
+    Some(out)
+}
+
+/// Per element: reflectance (clamped to [0, 1]) and emission, from the surfaces and, where
+/// given, the textures' footprints.
+pub fn materials(
+    surfaces: &[Surface],
+    mesh: &Mesh,
+    textures: Option<&ElementTextures>,
+) -> (Vec<Rgb>, Vec<Rgb>) {
+    let n = mesh.element_count();
+    let (mut rho, mut emission) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    for (i, &id) in mesh.leaves.iter().enumerate() {
+        let root = mesh.nodes[id as usize].root as usize;
+        let s = &surfaces[mesh.root_surface[root] as usize];
+        let (mut r, mut e) = (s.reflectance, s.emission);
+        if let Some(t) = textures {
+            for c in 0..3 {
+                r[c] = (r[c] * t.reflectance[i][c]).clamp(0.0, 1.0);
+                e[c] = (e[c] * t.emission[i][c]).max(0.0);
+            }
+        }
+        rho.push(r);
+        emission.push(e);
+    }
+    (rho, emission)
+}
+
+/// Irradiance (lux per unit of colour) at each element's centroid from the punctual lights and
+/// the sky, shadowed; `None` when the scene has neither.
+pub fn direct_irradiance(
+    lights: &[Light],
+    sky: Option<&Sky>,
+    mesh: &Mesh,
+    vis: &dyn Visibility,
+    params: &crate::FormFactorParams,
+) -> Option<Vec<Rgb>> {
+    let sky = sky.filter(|s| !s.is_dark());
+    if lights.is_empty() && sky.is_none() {
+        return None;
+    }
+    let mut e = if lights.is_empty() {
+        vec![[0.0; 3]; mesh.element_count()]
+    } else {
+        crate::lights::direct_irradiance(mesh, lights, vis)
+    };
+    if let Some(sky) = sky {
+        let s = sky_irradiance(mesh, sky, vis, params.sky_rays, params.seed);
+        for (a, b) in e.iter_mut().zip(s) {
+            for c in 0..3 {
+                a[c] += b[c];
+            }
+        }
+    }
+    Some(e)
+}
+
+/// Irradiance from the sky at each element's centroid: `rays` cosine-weighted directions
+/// (stratified on a √rays × √rays grid, jittered by a generator seeded with the element's
+/// stable id), each that leaves the scene unblocked adding `π · L_sky / rays`. Exact in the
+/// mean; an unoccluded element under a uniform sky gets exactly `π · L`.
+pub fn sky_irradiance(
+    mesh: &Mesh,
+    sky: &Sky,
+    vis: &dyn Visibility,
+    rays: u32,
+    seed: u64,
+) -> Vec<Rgb> {
+    let side = (f64::from(rays.max(1)).sqrt().round() as u32).max(1);
+    let count = f64::from(side * side);
+    let mut out = vec![[0.0; 3]; mesh.element_count()];
+    out.par_iter_mut()
+        .with_min_len(64)
+        .enumerate()
+        .for_each(|(leaf, e)| {
+            let id = mesh.leaves[leaf];
+            let node = &mesh.nodes[id as usize];
+            let n = node.normal;
+            let (t, b) = n.any_orthonormal_pair();
+            let mut rng = crate::rng::Rng::new(crate::rng::hash(seed, mesh.stable_id(id), 0x5C7));
+            // The scene fits in the unit cube around the origin: 1.75 units (past its half
+            // diagonal) always leave it, and keep the segment's end cut short.
+            let origin = node.centroid + n * 1e-5;
+            let mut sum = DVec3::ZERO;
+            for i in 0..side {
+                for j in 0..side {
+                    let u1 = (f64::from(i) + rng.f64()) / f64::from(side);
+                    let u2 = (f64::from(j) + rng.f64()) / f64::from(side);
+                    let r = u1.sqrt();
+                    let phi = std::f64::consts::TAU * u2;
+                    let dir = t * (r * phi.cos()) + b * (r * phi.sin()) + n * (1.0 - u1).sqrt();
+                    if vis.segment_clear(origin.as_vec3(), (origin + dir * 1.75).as_vec3()) {
+                        sum += DVec3::from(sky.radiance(dir));
+                    }
+                }
+            }
+            let irr = sum * (std::f64::consts::PI / count);
+            *e = irr.to_array();
+        });
+    out
+}
+
+/// The source term `S = E + ρ · E_direct / π` per element.
+pub fn sources(rho: &[Rgb], emission: &[Rgb], direct: Option<&[Rgb]>) -> Vec<Rgb> {
+    let mut s = emission.to_vec();
+    if let Some(d) = direct {
+        for i in 0..s.len() {
+            for c in 0..3 {
+                s[i][c] += rho[i][c] * d[i][c] / std::f64::consts::PI;
+            }
+        }
+    }
+    s
+}
