@@ -24,7 +24,7 @@ use bevy_tasks::{AsyncComputeTaskPool, Task, TaskPoolBuilder, futures::check_rea
 use radiant_radiosity::bake::STALL_STEPS;
 use radiant_radiosity::metrics::{SurfaceMean, surface_means};
 use radiant_radiosity::{Bake, BakeParams, Mesh, Rgb};
-use radiant_scene::{Light, Scene, Surface};
+use radiant_scene::{Light, Scene, Sky, Surface};
 
 use crate::app::{App, Plugin, PostUpdate};
 use crate::scene::{
@@ -199,7 +199,7 @@ pub struct SceneChanges {
     pub geometry: bool,
     /// Only materials of static surfaces changed.
     pub materials: bool,
-    /// Punctual lights were added, removed, moved or changed.
+    /// Punctual lights were added, removed, moved or changed, or the sky ([`SceneSky`]).
     pub lights: bool,
 }
 
@@ -227,12 +227,14 @@ pub fn detect_scene_changes(
     >,
     mut removed_static: RemovedComponents<Static>,
     mut removed_lights: RemovedComponents<PunctualLight>,
+    sky: Option<Res<crate::scene::SceneSky>>,
     mut changes: ResMut<SceneChanges>,
 ) {
     if !geometry.is_empty() || removed_static.read().count() > 0 {
         changes.geometry = true;
     }
-    if !lights.is_empty() || removed_lights.read().count() > 0 {
+    let sky_changed = sky.is_some_and(|s| s.is_changed());
+    if !lights.is_empty() || removed_lights.read().count() > 0 || sky_changed {
         changes.lights = true;
     }
     if !materials.is_empty() {
@@ -292,7 +294,8 @@ enum Start {
 /// geometry moved, added or removed (the scene to change to).
 struct Edit {
     surfaces: Vec<Surface>,
-    lights: Option<Vec<Light>>,
+    /// New punctual lights and sky.
+    lights: Option<(Vec<Light>, Option<Sky>)>,
     geometry: Option<Arc<Scene>>,
 }
 
@@ -317,8 +320,8 @@ fn apply(
             return Err(radiant_radiosity::BakeError::NeedsRebuild);
         }
         bake.edit_surfaces(&edit.surfaces)?;
-        if let Some(l) = &edit.lights {
-            bake.edit_lights(l)?;
+        if let Some((l, sky)) = &edit.lights {
+            bake.edit_lights_and_sky(l, sky.as_ref())?;
         }
     }
     Ok(())
@@ -738,7 +741,7 @@ fn requeue_lost_edit(world: &mut World, epoch: u64) {
     let scene = gather_scene(world);
     world.resource_mut::<BakeWorker>().edit = Some(Edit {
         surfaces: scene.surfaces.clone(),
-        lights: Some(scene.lights.clone()),
+        lights: Some((scene.lights.clone(), scene.sky.clone())),
         geometry: Some(Arc::new(scene)),
     });
     world.resource_mut::<BakeStatus>().stale = true;
@@ -846,7 +849,9 @@ pub fn drive_bake(world: &mut World) {
         world.resource_mut::<BakeStatus>().stale = true;
     } else if changes.materials || changes.lights {
         let scene = gather_scene(world);
-        let lights = changes.lights.then(|| scene.lights.clone());
+        let lights = changes
+            .lights
+            .then(|| (scene.lights.clone(), scene.sky.clone()));
         if !scene.has_emitters() {
             no_emitters(world);
             return;

@@ -50,8 +50,9 @@ pub mod prelude {
         RenderSystems, Sobel, Ssao, Tonemapping,
     };
     pub use crate::scene::{
-        Geometry, GlobalTransform, Material, PunctualLight, SceneCamera, ScenePlugin, Static,
-        SurfaceOrder, Transform, TransformSystems, gather_scene, spawn_scene,
+        Geometry, GlobalTransform, Material, MaterialTextures, PunctualLight, SceneCamera,
+        SceneImages, ScenePlugin, SceneSky, Static, SurfaceOrder, Transform, TransformSystems,
+        gather_scene, spawn_scene,
     };
     pub use bevy_ecs::prelude::*;
 }

@@ -281,6 +281,31 @@ fn light_edits_keep_the_links() {
 }
 
 #[test]
+fn a_sky_edit_in_the_world_keeps_the_links() {
+    // The Cornell box is open at the front: a sky lights it through the opening.
+    let mut app = cornell_app(None);
+    converge(&mut app);
+    let before = app.world.resource::<BakedLighting>().surfaces.clone();
+    app.world
+        .insert_resource(SceneSky(Some(radiant_scene::Sky::Uniform {
+            radiance: [0.5, 0.6, 0.8],
+        })));
+    app.update();
+    converge(&mut app);
+    let status = app.world.resource::<BakeStatus>().clone();
+    assert_eq!((status.builds, status.edits), (1, 1), "{status:?}");
+    let after = app.world.resource::<BakedLighting>().surfaces.clone();
+    let floor = |s: &[radiant_radiosity::metrics::SurfaceMean]| {
+        s.iter().find(|m| m.name == "floor").expect("floor").mean[2]
+    };
+    assert!(floor(&after) > floor(&before) * 1.05, "the sky adds light");
+    let want = fresh(&mut app);
+    assert!(gather_scene(&mut app.world).sky.is_some());
+    // Links refined for the lamp alone against a fresh bake's for lamp and sky.
+    assert_surfaces_close(&app, &want, 0.03);
+}
+
+#[test]
 fn a_bake_resumes_from_its_checkpoint_after_a_restart() {
     let dir = std::env::temp_dir().join(format!("radiant-ecs-ckpt-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("dir");

@@ -596,6 +596,22 @@ impl Bake {
         result
     }
 
+    /// Replaces the punctual lights and the sky (`None`: no sky), as [`Bake::edit_lights`]
+    /// does the lights: the sky's light is computed again with its visibility rays, the links
+    /// are kept.
+    pub fn edit_lights_and_sky(
+        &mut self,
+        lights: &[Light],
+        sky: Option<&radiant_scene::Sky>,
+    ) -> Result<(), BakeError> {
+        let old = std::mem::replace(&mut self.sky, sky.cloned());
+        let result = self.edit_lights(lights);
+        if result.is_err() {
+            self.sky = old;
+        }
+        result
+    }
+
     /// Moves, adds or removes static geometry (and takes the scene's materials and lights along)
     /// and keeps what the edit does not touch: the form factors of links whose receiver and
     /// source are on triangles that stayed where they were, and whose shaft misses the bounds of
