@@ -238,6 +238,15 @@ fn png_uri(w: u32, h: u32, rgba: Vec<u8>) -> String {
     format!("data:image/png;base64,{}", base64(png.get_ref()))
 }
 
+/// Adds the document's one texture: a sampler (JSON members), texture 0 reading image 0 from
+/// `uri`.
+fn add_texture(doc: &mut Doc, sampler: &str, uri: &str) {
+    doc.extra.push(format!(r#""samplers":[{{{sampler}}}]"#));
+    doc.extra
+        .push(r#""textures":[{"sampler":0,"source":0}]"#.into());
+    doc.extra.push(format!(r#""images":[{{"uri":"{uri}"}}]"#));
+}
+
 /// Rotation by -90° about x as a glTF quaternion (x, y, z, w): the node's -z axis points to -y.
 const POINT_DOWN: &str = r#""rotation":[-0.7071068,0,0,0.7071068]"#;
 
@@ -511,14 +520,11 @@ fn base_color_texture_mean_scales_reflectance() {
     ));
     let (p, i) = rect_up(0.0, 1.0, 0.0, 1.0, 0.0);
     doc.mesh_uv("tile", &p, Some(&uv_of(&p)), &i, m);
-    doc.extra
-        .push(r#""samplers":[{"magFilter":9729,"minFilter":9729}]"#.into());
-    doc.extra
-        .push(r#""textures":[{"sampler":0,"source":0}]"#.into());
-    doc.extra.push(format!(
-        r#""images":[{{"uri":"data:image/png;base64,{}"}}]"#,
-        base64(png.get_ref())
-    ));
+    add_texture(
+        &mut doc,
+        r#""magFilter":9729,"minFilter":9729"#,
+        &format!("data:image/png;base64,{}", base64(png.get_ref())),
+    );
     let scene = doc.load().expect("scene with a data-URI texture loads");
     let s = &scene.surfaces[surface_index(&scene, "tile") as usize];
     // The mean of the decoded (linear) texels, per channel.
@@ -672,12 +678,11 @@ fn checker_floor() -> (Scene, [f64; 2]) {
     );
     let (p, i) = rect_up(0.0, 1.0, 0.0, 1.0, 0.0);
     doc.mesh_uv("floor", &p, Some(&uv_of(&p)), &i, m);
-    doc.extra
-        .push(r#""samplers":[{"magFilter":9728,"minFilter":9728}]"#.into());
-    doc.extra
-        .push(r#""textures":[{"sampler":0,"source":0}]"#.into());
-    doc.extra
-        .push(format!(r#""images":[{{"uri":"{}"}}]"#, png_uri(4, 4, rgba)));
+    add_texture(
+        &mut doc,
+        r#""magFilter":9728,"minFilter":9728"#,
+        &png_uri(4, 4, rgba),
+    );
     let json = doc.json().replacen(
         r#""scenes":[{"#,
         r#""scenes":[{"extras":{"radiant":{"sky":"1"}},"#,
@@ -852,13 +857,11 @@ fn masked_scene() -> Scene {
         .map(|v| [(v[0] + 2.0) / 4.0, (v[2] + 2.0) / 4.0])
         .collect();
     doc.mesh_uv("leaves", &p, Some(&uv), &i, m);
-    doc.extra.push(
-        r#""samplers":[{"magFilter":9728,"minFilter":9728,"wrapS":33071,"wrapT":33071}]"#.into(),
+    add_texture(
+        &mut doc,
+        r#""magFilter":9728,"minFilter":9728,"wrapS":33071,"wrapT":33071"#,
+        &png_uri(2, 1, rgba),
     );
-    doc.extra
-        .push(r#""textures":[{"sampler":0,"source":0}]"#.into());
-    doc.extra
-        .push(format!(r#""images":[{{"uri":"{}"}}]"#, png_uri(2, 1, rgba)));
     doc.light(
         r#"{"name":"sun","type":"directional","color":[1,1,1],"intensity":1000}"#.into(),
         POINT_DOWN,
