@@ -62,6 +62,12 @@ pub mod bridge {
         scene: &Scene,
         bake: &BakeResult,
     ) {
-        radiant_ecs::render::fill_lightmap(render_scene, scene, &bake.mesh, &bake.radiosity);
+        radiant_ecs::render::fill_lightmap(
+            render_scene,
+            scene,
+            &bake.mesh,
+            &bake.radiosity,
+            &bake.system.rho,
+        );
     }
 }

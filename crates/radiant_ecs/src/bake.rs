@@ -131,6 +131,8 @@ pub struct BakedLighting {
     pub mesh: Option<Arc<Mesh>>,
     /// Radiosity per element (emissive units).
     pub radiosity: Arc<Vec<Rgb>>,
+    /// Reflectance per element (textured surfaces: the texture's mean over the element).
+    pub reflectance: Arc<Vec<Rgb>>,
     /// Area-weighted mean radiosity per static surface, in gather order.
     pub surfaces: Vec<SurfaceMean>,
     /// The estimated error when it was published.
@@ -270,6 +272,7 @@ enum Report {
     },
     Publish {
         radiosity: Vec<Rgb>,
+        reflectance: Vec<Rgb>,
         surfaces: Vec<SurfaceMean>,
         epoch: u64,
         converged: bool,
@@ -503,6 +506,7 @@ fn work(
             let surfaces = surface_means(&bake.surfaces, &bake.mesh, &radiosity);
             send(Report::Publish {
                 radiosity,
+                reflectance: bake.system.rho.clone(),
                 surfaces,
                 epoch,
                 converged: done,
@@ -658,6 +662,7 @@ fn drain(world: &mut World) {
             }
             Report::Publish {
                 radiosity,
+                reflectance,
                 surfaces,
                 epoch,
                 converged,
@@ -671,6 +676,7 @@ fn drain(world: &mut World) {
                 l.generation += 1;
                 l.mesh = mesh;
                 l.radiosity = Arc::new(radiosity);
+                l.reflectance = Arc::new(reflectance);
                 l.surfaces = surfaces;
                 l.estimated_error = err;
                 let mut s = world.resource_mut::<BakeStatus>();

@@ -148,12 +148,22 @@ impl Plugin for RenderPlugin {
 
 /// Fills a light map made by `RenderScene::from_scene(scene, ..)` with the incident radiance
 /// `H = (B − E)/ρ̃` of the element under each texel, so that the renderer's `albedo × H + E`
-/// reproduces the baked `B`; `ρ̃` is the albedo as the 8-bit G-buffer stores it. Dynamic
-/// surfaces (not in the bake) get `H = 0`.
+/// reproduces the baked `B`; `ρ̃` is the albedo as the 8-bit G-buffer stores it. On a textured
+/// surface `ρ̃` is the element's own reflectance (`reflectance`, per element, the texture's
+/// mean over its footprint: the renderer multiplies by the texel instead); where
+/// `reflectance` does not match the mesh, the surface's. Dynamic surfaces (not in the bake)
+/// get `H = 0`.
 ///
 /// The bake's radiosity already holds the punctual lights' direct light, with shadows, so a
 /// frame drawn from this light map must not add the lights again: [`lit_by_bake`] removes them.
-pub fn fill_lightmap(rs: &mut RenderScene, scene: &Scene, mesh: &Mesh, radiosity: &[Rgb]) {
+pub fn fill_lightmap(
+    rs: &mut RenderScene,
+    scene: &Scene,
+    mesh: &Mesh,
+    radiosity: &[Rgb],
+    reflectance: &[Rgb],
+) {
+    let per_element = reflectance.len() == radiosity.len();
     // Scene triangle → bake input triangle (the bake meshes the static part only).
     let mut next = 0u32;
     let to_root: Vec<Option<u32>> = scene
@@ -184,8 +194,13 @@ pub fn fill_lightmap(rs: &mut RenderScene, scene: &Scene, mesh: &Mesh, radiosity
         let Some(b) = radiosity.get(e as usize) else {
             return [0.0; 3];
         };
+        let textured = surface.base_color_texture.is_some() && per_element;
         [0, 1, 2].map(|c| {
-            let stored = (surface.reflectance[c] * 255.0).round() / 255.0;
+            let stored = if textured {
+                reflectance[e as usize][c]
+            } else {
+                (surface.reflectance[c] * 255.0).round() / 255.0
+            };
             if stored > 0.0 {
                 ((b[c] - surface.emission[c]) / stored).clamp(0.0, 65504.0) as f32
             } else {
@@ -254,7 +269,7 @@ fn build_scene(
     if let Some(mesh) = &lit.mesh
         && !lit.radiosity.is_empty()
     {
-        fill_lightmap(&mut rs, &scene, mesh, &lit.radiosity);
+        fill_lightmap(&mut rs, &scene, mesh, &lit.radiosity, &lit.reflectance);
         lit_by_bake(&mut rs);
     }
     world.resource_mut::<RenderState>().scene = Some(Arc::new(scene));

@@ -13,6 +13,7 @@ use radiant_render::graph::{
     CompiledGraph, GraphReport, PassTimings, RenderGraph, TextureDesc, TextureHandle, TexturePool,
 };
 use radiant_render::lighting::{DebugView, LightingPipeline, lighting_pass};
+use radiant_render::material::TextureCache;
 use radiant_render::scene::{CameraView, GpuScene, RenderScene};
 use radiant_render::ssao::{AO_FORMAT, Ssao, SsaoPipeline, ssao_pass};
 use radiant_render::{GpuContext, RenderError, Requirements};
@@ -159,6 +160,7 @@ pub struct FrameRenderer {
     overlay: Option<Arc<dyn Overlay>>,
     overlay_generation: u64,
     pool: TexturePool,
+    textures: TextureCache,
     compiled: Option<Compiled>,
     compiles: u64,
 }
@@ -190,7 +192,8 @@ impl FrameRenderer {
             support.bloom = false;
         }
         let pipelines = FramePipelines::new(gpu);
-        let gpu_scene = GpuScene::upload(gpu, scene)?;
+        let mut textures = TextureCache::new();
+        let gpu_scene = GpuScene::upload_cached(gpu, scene, &mut textures)?;
         gpu.take_errors()?;
         Ok(Self {
             pipelines,
@@ -201,14 +204,16 @@ impl FrameRenderer {
             overlay: None,
             overlay_generation: 0,
             pool: TexturePool::new(),
+            textures,
             compiled: None,
             compiles: 0,
         })
     }
 
-    /// Replaces the scene (the graph recompiles on the next frame).
+    /// Replaces the scene (the graph recompiles on the next frame). Textures whose pixels the
+    /// previous scene shared are not uploaded again.
     pub fn set_scene(&mut self, gpu: &GpuContext, scene: &RenderScene) -> Result<(), RenderError> {
-        self.scene = Arc::new(GpuScene::upload(gpu, scene)?);
+        self.scene = Arc::new(GpuScene::upload_cached(gpu, scene, &mut self.textures)?);
         self.camera = scene.camera;
         self.scene_generation += 1;
         Ok(())
@@ -243,6 +248,11 @@ impl FrameRenderer {
     /// How many times the graph has been compiled.
     pub fn compiles(&self) -> u64 {
         self.compiles
+    }
+
+    /// How many material textures were uploaded so far (cached ones count once).
+    pub fn material_texture_uploads(&self) -> usize {
+        self.textures.uploads()
     }
 
     /// How many GPU textures the pool has ever created.

@@ -113,10 +113,11 @@ pub fn run_node(
 }
 
 /// A quad with corners `p0`, `p0 + u`, `p0 + u + v`, `p0 + v` (counter-clockwise seen from
-/// the side its normal points to).
+/// the side its normal points to), texture coordinates (0, 0) to (1, 1) along `u` and `v`.
 pub fn quad(vertices: &mut Vec<Vertex>, p0: Vec3, u: Vec3, v: Vec3, albedo: [f32; 3]) {
     let n = u.cross(v).normalize().to_array();
     let corners = [p0, p0 + u, p0 + u + v, p0 + v];
+    let uvs = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
     for k in [0, 1, 2, 0, 2, 3] {
         vertices.push(Vertex {
             position: corners[k].to_array(),
@@ -124,6 +125,7 @@ pub fn quad(vertices: &mut Vec<Vertex>, p0: Vec3, u: Vec3, v: Vec3, albedo: [f32
             albedo,
             emissive: [0.0; 3],
             lightmap_uv: [0.5, 0.5],
+            uv: uvs[k],
         });
     }
 }
@@ -135,6 +137,10 @@ pub fn scene(vertices: Vec<Vertex>, eye: Vec3, at: Vec3, h: f32) -> RenderScene 
         origin: DVec3::ZERO,
         indices: (0..vertices.len() as u32).collect(),
         vertices,
+        textures: Vec::new(),
+        materials: Vec::new(),
+        draws: Vec::new(),
+        sky: None,
         lights: Vec::new(),
         camera: CameraView {
             position: eye.as_dvec3(),

@@ -601,14 +601,20 @@ fn every_debug_view_renders_and_differs_from_the_lit_image() {
 fn golden_cornell_box() {
     let gpu = gpu();
     let mut frame = FrameRenderer::new(&gpu, &cornell()).expect("renderer");
-    let (w, h) = (256u32, 256u32);
     let c = frame
-        .capture(&gpu, w, h, &FrameSettings::default())
+        .capture(&gpu, 256, 256, &FrameSettings::default())
         .expect("capture");
+    assert_golden("cornell_256.png", &c.ldr);
+}
+
+/// Compares a frame with `tests/golden/NAME` (written instead with `RADIANT_UPDATE_GOLDEN=1`);
+/// on a mismatch writes the frame and a difference image next to the test binary's temp dir.
+fn assert_golden(name: &str, ldr: &radiant_render::capture::Image) {
+    let (w, h) = (ldr.width, ldr.height);
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden");
-    let golden = dir.join("cornell_256.png");
+    let golden = dir.join(name);
     if std::env::var_os("RADIANT_UPDATE_GOLDEN").is_some() {
-        radiant_render::capture::write_png(&golden, &c.ldr).expect("write golden");
+        radiant_render::capture::write_png(&golden, ldr).expect("write golden");
         return;
     }
     let want = image::open(&golden)
@@ -621,7 +627,7 @@ fn golden_cornell_box() {
         .to_rgba8();
     assert_eq!(want.dimensions(), (w, h));
     let luma = |r: f64, g: f64, b: f64| (0.2126 * r + 0.7152 * g + 0.0722 * b) / 255.0;
-    let got_bytes = c.ldr.to_rgba8();
+    let got_bytes = ldr.to_rgba8();
     let a: Vec<f64> = got_bytes
         .chunks_exact(4)
         .map(|p| luma(p[0].into(), p[1].into(), p[2].into()))
@@ -635,7 +641,8 @@ fn golden_cornell_box() {
     // drivers differ in rounding and filtering, which 0.97 allows for.
     if score < 0.97 {
         let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"));
-        radiant_render::capture::write_png(&out.join("cornell_256.actual.png"), &c.ldr)
+        let stem = name.trim_end_matches(".png");
+        radiant_render::capture::write_png(&out.join(format!("{stem}.actual.png")), ldr)
             .expect("write actual");
         let diff: Vec<u8> = a
             .iter()
@@ -647,10 +654,10 @@ fn golden_cornell_box() {
             .collect();
         image::RgbaImage::from_raw(w, h, diff)
             .expect("diff")
-            .save(out.join("cornell_256.diff.png"))
+            .save(out.join(format!("{stem}.diff.png")))
             .expect("write diff");
         panic!(
-            "golden image SSIM {score:.4} < 0.97; actual and diff written to {}",
+            "golden image {name}: SSIM {score:.4} < 0.97; actual and diff written to {}",
             out.display()
         );
     }
@@ -880,4 +887,353 @@ fn an_overlay_is_the_last_pass_keeps_the_frame_and_leaves_with_it() {
     let r = frame.report().expect("compiled");
     assert!(!r.passes.contains(&"overlay_pass"));
     assert!(!r.physical_textures.iter().any(|(n, _)| *n == "composited"));
+}
+
+// ---- Materials, smooth normals and the sky (the renderer half of real levels) ----
+
+use radiant_render::material::{DrawRange, RenderMaterial, RenderTexture};
+use radiant_scene::texture::Sampler;
+
+/// A 64 × 64 texture: its left half red above, green below (opaque), its right half blue and
+/// fully transparent.
+fn half_cut_texture() -> RenderTexture {
+    let mut px = Vec::with_capacity(64 * 64 * 4);
+    for y in 0..64 {
+        for x in 0..64 {
+            px.extend(match (x < 32, y < 32) {
+                (true, true) => [200, 40, 40, 255],
+                (true, false) => [40, 200, 40, 255],
+                (false, _) => [40, 40, 200, 0],
+            });
+        }
+    }
+    RenderTexture {
+        name: "half_cut".into(),
+        width: 64,
+        height: 64,
+        pixels: px.into(),
+    }
+}
+
+/// The linear colour of sRGB byte `b`.
+fn lin(b: u8) -> f32 {
+    radiant_color::srgb_to_linear(f64::from(b) / 255.0) as f32
+}
+
+/// A textured, alpha-masked quad at z = 0 (2 m wide, facing +z) in front of a grey one at
+/// z = −1, seen from z = 3.
+fn masked_quad_scene() -> RenderScene {
+    let mut v = Vec::new();
+    quad(
+        &mut v,
+        Vec3::new(-1.0, -1.0, 0.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        Vec3::new(0.0, 2.0, 0.0),
+        [1.0; 3],
+    );
+    quad(
+        &mut v,
+        Vec3::new(-3.0, -3.0, -1.0),
+        Vec3::new(6.0, 0.0, 0.0),
+        Vec3::new(0.0, 6.0, 0.0),
+        [0.3; 3],
+    );
+    let mut s = scene(v, Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 1.0);
+    s.textures = vec![half_cut_texture()];
+    s.materials = vec![
+        RenderMaterial {
+            texture: Some(0),
+            sampler: Sampler {
+                nearest: true,
+                ..Sampler::default()
+            },
+            alpha_cutoff: Some(0.5),
+            ..RenderMaterial::default()
+        },
+        RenderMaterial::default(),
+    ];
+    s.draws = vec![
+        DrawRange {
+            material: 0,
+            first: 0,
+            count: 6,
+        },
+        DrawRange {
+            material: 1,
+            first: 6,
+            count: 6,
+        },
+    ];
+    s
+}
+
+fn albedo_view() -> FrameSettings {
+    FrameSettings {
+        debug_view: DebugView::Albedo,
+        ..FrameSettings::MINIMAL
+    }
+}
+
+#[test]
+fn a_textured_masked_quad_renders_its_texture_and_its_cut_out() {
+    let gpu = gpu();
+    let rs = masked_quad_scene();
+    let mut frame = FrameRenderer::new(&gpu, &rs).expect("renderer");
+    let (w, h) = (160u32, 160u32);
+    let img = frame.capture(&gpu, w, h, &albedo_view()).expect("capture").hdr;
+    let (mut texture, mut cut) = (0, 0);
+    for y in 0..h {
+        for x in 0..w {
+            let p = pixel_on_plane(&rs.camera, w, h, x, y, Vec3::Z, 0.0);
+            let (u, v) = ((p.x + 1.0) / 2.0, (p.y + 1.0) / 2.0);
+            // Skip texels next to a colour or coverage edge and the quad's border.
+            let near = |c: f32| (c - 0.5).abs() < 0.04 || !(0.04..=0.96).contains(&c);
+            if near(u) || near(v) {
+                continue;
+            }
+            let got = img.at(x, y);
+            let want = if u < 0.5 {
+                texture += 1;
+                if v < 0.5 {
+                    [lin(200), lin(40), lin(40)]
+                } else {
+                    [lin(40), lin(200), lin(40)]
+                }
+            } else {
+                // Cut out: the grey quad behind shows through.
+                cut += 1;
+                [0.3; 3]
+            };
+            for c in 0..3 {
+                assert!(
+                    (got[c] - want[c]).abs() <= 1.5 / 255.0,
+                    "pixel ({x}, {y}) uv ({u:.2}, {v:.2}): {got:?}, want {want:?}"
+                );
+            }
+        }
+    }
+    assert!(texture > 2000 && cut > 2000, "{texture} textured, {cut} cut");
+    // A new light map uploads the scene again, not its texture.
+    let uploads = frame.material_texture_uploads();
+    frame.set_scene(&gpu, &rs).expect("again");
+    frame.capture(&gpu, 32, 32, &albedo_view()).expect("capture");
+    assert_eq!((uploads, frame.material_texture_uploads()), (1, 1));
+}
+
+#[test]
+fn a_mipmapped_texture_far_away_shows_its_linear_mean() {
+    // A 1-texel checker of black and white seen from far: the mip chain gives the mean in
+    // linear light (0.5, sRGB 188), not the sRGB mean (128, linear 0.22).
+    let gpu = gpu();
+    let mut px = Vec::new();
+    for y in 0..256 {
+        for x in 0..256 {
+            let v = if (x + y) % 2 == 0 { 0 } else { 255 };
+            px.extend([v, v, v, 255]);
+        }
+    }
+    let mut v = Vec::new();
+    quad(
+        &mut v,
+        Vec3::new(-1.0, -1.0, 0.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        Vec3::new(0.0, 2.0, 0.0),
+        [1.0; 3],
+    );
+    let mut rs = scene(v, Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 1.0);
+    rs.textures = vec![RenderTexture {
+        name: "checker".into(),
+        width: 256,
+        height: 256,
+        pixels: px.into(),
+    }];
+    rs.materials = vec![RenderMaterial {
+        texture: Some(0),
+        ..RenderMaterial::default()
+    }];
+    rs.draws = vec![DrawRange {
+        material: 0,
+        first: 0,
+        count: 6,
+    }];
+    let mut frame = FrameRenderer::new(&gpu, &rs).expect("renderer");
+    let img = frame.capture(&gpu, 64, 64, &albedo_view()).expect("capture").hdr;
+    // The quad covers about 45 × 45 pixels: 5.7 texels per pixel.
+    let c = img.at(32, 32);
+    assert!((c[0] - 0.5).abs() < 0.03, "centre albedo {c:?}");
+}
+
+#[test]
+fn smooth_normals_interpolate_across_a_quad() {
+    let gpu = gpu();
+    let mut v = Vec::new();
+    quad(
+        &mut v,
+        Vec3::new(-1.0, -1.0, 0.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        Vec3::new(0.0, 2.0, 0.0),
+        [0.5; 3],
+    );
+    // Left vertices lean to −x, right ones to +x.
+    let s = std::f32::consts::FRAC_1_SQRT_2;
+    for vert in &mut v {
+        vert.normal = if vert.position[0] < 0.0 {
+            [-s, 0.0, s]
+        } else {
+            [s, 0.0, s]
+        };
+    }
+    let rs = scene(v, Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 1.0);
+    let mut frame = FrameRenderer::new(&gpu, &rs).expect("renderer");
+    let (w, h) = (96u32, 96u32);
+    let settings = FrameSettings {
+        debug_view: DebugView::Normal,
+        ..FrameSettings::MINIMAL
+    };
+    let img = frame.capture(&gpu, w, h, &settings).expect("capture").hdr;
+    let mut checked = 0;
+    for x in 0..w {
+        let p = pixel_on_plane(&rs.camera, w, h, x, h / 2, Vec3::Z, 0.0);
+        if p.x.abs() > 0.95 {
+            continue;
+        }
+        let t = (p.x + 1.0) / 2.0;
+        let want = (2.0 * t - 1.0) / ((2.0 * t - 1.0).powi(2) + 1.0).sqrt();
+        let got = img.at(x, h / 2)[0] * 2.0 - 1.0;
+        assert!(
+            (got - want).abs() < 0.01,
+            "x {x}: normal.x {got}, interpolated {want}"
+        );
+        checked += 1;
+    }
+    assert!(checked > 40, "{checked} pixels");
+}
+
+#[test]
+fn a_double_sided_surface_shows_its_own_side_from_each() {
+    // A front quad (red) and its rewound twin (blue), as the importer makes a double-sided
+    // surface: from the front only red is seen, from the back only blue (no z-fighting).
+    let gpu = gpu();
+    let mut v = Vec::new();
+    let (p0, u, w) = (
+        Vec3::new(-1.0, -1.0, 0.0),
+        Vec3::new(2.0, 0.0, 0.0),
+        Vec3::new(0.0, 2.0, 0.0),
+    );
+    quad(&mut v, p0, u, w, [0.8, 0.1, 0.1]);
+    quad(&mut v, p0, w, u, [0.1, 0.1, 0.8]);
+    for view_from in [3.0f32, -3.0] {
+        let mut rs = scene(v.clone(), Vec3::new(0.0, 0.0, view_from), Vec3::ZERO, 1.0);
+        rs.materials = vec![RenderMaterial {
+            cull_back: true,
+            ..RenderMaterial::default()
+        }];
+        rs.draws = vec![DrawRange {
+            material: 0,
+            first: 0,
+            count: 12,
+        }];
+        let mut frame = FrameRenderer::new(&gpu, &rs).expect("renderer");
+        let img = frame.capture(&gpu, 32, 32, &albedo_view()).expect("capture").hdr;
+        let want = if view_from > 0.0 { 0.8 } else { 0.1 };
+        for y in 8..24 {
+            for x in 8..24 {
+                let c = img.at(x, y);
+                assert!(
+                    (c[0] - want).abs() < 0.01 && (c[2] - (0.9 - want)).abs() < 0.01,
+                    "seen from z = {view_from}: pixel ({x}, {y}) {c:?}"
+                );
+            }
+        }
+    }
+}
+
+/// The direction of the camera ray through the centre of pixel (x, y).
+fn pixel_dir(cam: &radiant_render::scene::CameraView, w: u32, h: u32, x: u32, y: u32) -> Vec3 {
+    let a = pixel_on_plane(cam, w, h, x, y, Vec3::Z, -1.0);
+    let b = pixel_on_plane(cam, w, h, x, y, Vec3::Z, -2.0);
+    (b - a).normalize()
+}
+
+#[test]
+fn the_sky_is_seen_behind_the_scene() {
+    let gpu = gpu();
+    // A small quad low in the view; everything else is sky.
+    let mut v = Vec::new();
+    quad(
+        &mut v,
+        Vec3::new(-0.2, -0.8, 0.0),
+        Vec3::new(0.4, 0.0, 0.0),
+        Vec3::new(0.0, 0.4, 0.0),
+        [0.5; 3],
+    );
+    let texels: Vec<[f32; 3]> = (0..32)
+        .map(|i| [0.1 + i as f32 * 0.05, 1.0, 2.0 - i as f32 * 0.05])
+        .collect();
+    let skies = [
+        radiant_scene::Sky::Uniform {
+            radiance: [0.2, 0.4, 0.9],
+        },
+        radiant_scene::Sky::Gradient {
+            zenith: [0.1, 0.3, 1.5],
+            horizon: [1.0, 0.8, 0.6],
+        },
+        radiant_scene::Sky::Image(radiant_scene::sky::SkyImage {
+            path: "test".into(),
+            width: 8,
+            height: 4,
+            texels: texels.into(),
+        }),
+    ];
+    let (w, h) = (64u32, 48u32);
+    for sky in skies {
+        let mut rs = scene(v.clone(), Vec3::new(0.0, 0.3, 3.0), Vec3::new(0.0, 0.5, 0.0), 1.0);
+        rs.camera.far = 50.0;
+        rs.sky = Some(sky.clone());
+        let mut frame = FrameRenderer::new(&gpu, &rs).expect("renderer");
+        let img = frame
+            .capture(&gpu, w, h, &FrameSettings::MINIMAL)
+            .expect("capture")
+            .hdr;
+        let (mut sky_px, mut off) = (0, 0);
+        for y in 0..h {
+            for x in 0..w {
+                let p = pixel_on_plane(&rs.camera, w, h, x, y, Vec3::Z, 0.0);
+                if p.x.abs() < 0.25 && p.y > -0.85 && p.y < -0.35 {
+                    continue;
+                }
+                let want = sky.radiance(pixel_dir(&rs.camera, w, h, x, y).as_dvec3());
+                let got = img.at(x, y);
+                sky_px += 1;
+                let close = (0..3).all(|c| (f64::from(got[c]) - want[c]).abs() <= 2e-3 * want[c].max(1.0));
+                if !close {
+                    off += 1;
+                }
+            }
+        }
+        // The image sky is sampled nearest: a pixel on a texel edge may take its neighbour.
+        let allowed = if matches!(sky, radiant_scene::Sky::Image(_)) { sky_px / 20 } else { 0 };
+        assert!(off <= allowed, "{sky:?}: {off} of {sky_px} sky pixels differ");
+    }
+}
+
+#[test]
+fn golden_textured_scene() {
+    // A textured, masked quad before a grey wall under a gradient sky, lit by a light map.
+    let gpu = gpu();
+    let mut rs = masked_quad_scene();
+    let eye = Vec3::new(3.0, 1.5, 6.0);
+    rs.camera.position = eye.as_dvec3();
+    rs.camera.forward = (Vec3::new(0.0, 0.0, -0.5) - eye).normalize();
+    rs.camera.far = 50.0;
+    rs.materials[0].sampler = Sampler::default();
+    rs.sky = Some(radiant_scene::Sky::Gradient {
+        zenith: [0.2, 0.4, 1.2],
+        horizon: [1.0, 0.9, 0.8],
+    });
+    let mut frame = FrameRenderer::new(&gpu, &rs).expect("renderer");
+    let c = frame
+        .capture(&gpu, 256, 256, &FrameSettings::default())
+        .expect("capture");
+    assert_golden("textured_256.png", &c.ldr);
 }

@@ -16,6 +16,7 @@ pub mod context;
 pub mod gbuffer;
 pub mod graph;
 pub mod lighting;
+pub mod material;
 pub mod scene;
 pub mod ssao;
 pub mod util;

@@ -1,13 +1,16 @@
-//! What the renderer draws: vertices with material colours and light-map coordinates, punctual
-//! lights, a camera and a light map, and their GPU copies.
+//! What the renderer draws: vertices with smooth normals, material colours, texture and light-map
+//! coordinates; materials with their textures, drawn one index range each; punctual lights, a
+//! camera, a light map and a sky; and their GPU copies.
 //!
 //! Positions are stored relative to [`RenderScene::origin`] (f64), so a scene far from the world
 //! origin keeps full f32 precision near the camera.
 
-use glam::{DVec3, Mat4, Vec3};
+use glam::{DVec3, Mat4, Vec2, Vec3};
+use radiant_scene::Sky;
 use wgpu::util::DeviceExt;
 
 use crate::RenderError;
+use crate::material::{DrawRange, GpuMaterial, RenderMaterial, RenderTexture, TextureCache};
 
 /// One vertex of the static geometry.
 #[repr(C)]
@@ -15,14 +18,17 @@ use crate::RenderError;
 pub struct Vertex {
     /// Position relative to the scene origin, metres.
     pub position: [f32; 3],
-    /// Unit normal.
+    /// Unit shading normal (smooth where the scene has vertex normals).
     pub normal: [f32; 3],
-    /// Linear diffuse reflectance (albedo).
+    /// Linear diffuse reflectance (albedo); with a base-colour texture, the factor it is
+    /// multiplied by.
     pub albedo: [f32; 3],
     /// Emitted radiance, linear, in the bake's units.
     pub emissive: [f32; 3],
     /// Light-map coordinates (the second UV set), in [0, 1].
     pub lightmap_uv: [f32; 2],
+    /// Base-colour texture coordinates (the material's set, `KHR_texture_transform` applied).
+    pub uv: [f32; 2],
 }
 
 /// The kind of a punctual light.
@@ -105,6 +111,10 @@ impl CameraView {
 /// `max_texture_dimension_2d` is 8192).
 pub const MAX_LIGHTMAP_SIDE: u32 = 8192;
 
+/// The most texels [`RenderScene::from_scene`] gives its grid atlas: a scene with many triangles
+/// gets fewer texels per triangle (down to 4 × 4), not a larger map.
+pub const MAX_LIGHTMAP_TEXELS: u64 = 8 << 20;
+
 /// A light map: incident radiance-weighted irradiance per texel (`H`, the bake's units: a
 /// surface of albedo `a` reflects radiance `a · H`), linear RGB.
 #[derive(Clone, Debug, PartialEq)]
@@ -128,7 +138,7 @@ pub struct LightmapTexel {
     pub v: f32,
     /// World position.
     pub position: DVec3,
-    /// The triangle's unit normal.
+    /// The triangle's unit face normal.
     pub normal: Vec3,
 }
 
@@ -139,8 +149,16 @@ pub struct RenderScene {
     pub origin: DVec3,
     /// Triangle-list vertices.
     pub vertices: Vec<Vertex>,
-    /// Triangle indices into `vertices`.
+    /// Triangle indices into `vertices`, grouped by material.
     pub indices: Vec<u32>,
+    /// Textures the materials sample.
+    pub textures: Vec<RenderTexture>,
+    /// Materials.
+    pub materials: Vec<RenderMaterial>,
+    /// One index range per material; empty: every index with the default material.
+    pub draws: Vec<DrawRange>,
+    /// What is seen where no geometry is (black without one).
+    pub sky: Option<Sky>,
     /// Punctual lights.
     pub lights: Vec<Light>,
     /// The camera.
@@ -150,16 +168,27 @@ pub struct RenderScene {
 }
 
 impl RenderScene {
-    /// Converts a radiosity scene: flat-shaded triangles with one light-map chart each, the
-    /// scene's lights and camera, and no light map yet.
+    /// Converts a radiosity scene: triangles with their vertex normals, base-colour textures,
+    /// alpha masks and one light-map chart each; the scene's lights, camera and sky; no light
+    /// map yet.
     ///
     /// Each triangle gets a `cell × cell` texel square in a grid atlas; its vertices map to three
-    /// corners, inset by one texel so bilinear filtering stays inside the chart.
+    /// corners, inset by one texel so bilinear filtering stays inside the chart. A scene whose
+    /// atlas would pass [`MAX_LIGHTMAP_TEXELS`] gets a smaller cell (not below 4).
     pub fn from_scene(scene: &radiant_scene::Scene, cell: u32) -> Result<Self, RenderError> {
         if scene.triangles.is_empty() {
             return Err(RenderError::EmptyScene);
         }
-        let cell = cell.clamp(4, 256);
+        let fit = ((MAX_LIGHTMAP_TEXELS as f64 / scene.triangles.len() as f64).sqrt() as u32)
+            .min(MAX_LIGHTMAP_SIDE / ((scene.triangles.len() as f64).sqrt().ceil() as u32).max(1));
+        let asked = cell.clamp(4, 256);
+        let cell = asked.min(fit).max(4);
+        if cell < asked {
+            tracing::info!(
+                "light-map cell {asked} → {cell} texels for {} triangles (at most {MAX_LIGHTMAP_TEXELS} texels)",
+                scene.triangles.len()
+            );
+        }
         let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
         for t in &scene.triangles {
             for v in t.vertices {
@@ -195,10 +224,12 @@ impl RenderScene {
             });
         }
         let (cols, w, h) = (cols as u32, w64 as u32, h64 as u32);
+        let (materials, surface_material, factors) = materials(scene);
         let mut vertices = Vec::with_capacity(scene.triangles.len() * 3);
         for (i, t) in scene.triangles.iter().enumerate() {
             let s = &scene.surfaces[t.surface as usize];
-            let normal = t.cross().normalize_or_zero().as_vec3().to_array();
+            let face = t.cross().normalize_or_zero().as_vec3();
+            let albedo = factors[t.surface as usize];
             let (cx, cy) = ((i as u32 % cols) * cell, (i as u32 / cols) * cell);
             let inset = 1.0;
             let span = cell as f32 - 2.0 * inset - 1.0;
@@ -210,15 +241,56 @@ impl RenderScene {
             };
             let uvs = [corner(0.0, 0.0), corner(1.0, 0.0), corner(0.0, 1.0)];
             for (k, p) in t.vertices.iter().enumerate() {
+                let n = t.normals[k];
+                let normal = if n.is_finite() && n.length_squared() > 0.5 {
+                    n
+                } else {
+                    face
+                };
+                let uv = s.base_color_texture.map_or(Vec2::ZERO, |tex| {
+                    let uv = tex.uv([t.uv[0][k], t.uv[1][k]]);
+                    if uv.is_finite() { uv } else { Vec2::ZERO }
+                });
                 vertices.push(Vertex {
                     position: (*p - origin).as_vec3().to_array(),
-                    normal,
-                    albedo: s.reflectance.map(|x| x as f32),
+                    normal: normal.to_array(),
+                    albedo,
                     emissive: s.emission.map(|x| x as f32),
                     lightmap_uv: uvs[k],
+                    uv: uv.to_array(),
                 });
             }
         }
+        // Indices grouped by material (vertices stay in triangle order, which the light-map
+        // fill relies on).
+        let mut by_material: Vec<Vec<u32>> = vec![Vec::new(); materials.len()];
+        for (i, t) in scene.triangles.iter().enumerate() {
+            let m = surface_material[t.surface as usize] as usize;
+            let i = i as u32 * 3;
+            by_material[m].extend([i, i + 1, i + 2]);
+        }
+        let mut indices = Vec::with_capacity(vertices.len());
+        let mut draws = Vec::new();
+        for (m, list) in by_material.into_iter().enumerate() {
+            if !list.is_empty() {
+                draws.push(DrawRange {
+                    material: m as u32,
+                    first: indices.len() as u32,
+                    count: list.len() as u32,
+                });
+                indices.extend(list);
+            }
+        }
+        let textures = scene
+            .images
+            .iter()
+            .map(|img| RenderTexture {
+                name: img.name.clone(),
+                width: img.width,
+                height: img.height,
+                pixels: img.pixels.clone(),
+            })
+            .collect();
         let diag = (hi - lo).length().max(1e-6);
         let camera = scene.camera.map_or(
             CameraView {
@@ -262,8 +334,12 @@ impl RenderScene {
             .collect();
         Ok(Self {
             origin,
-            indices: (0..vertices.len() as u32).collect(),
+            indices,
             vertices,
+            textures,
+            materials,
+            draws,
+            sky: scene.sky.clone(),
             lights,
             camera,
             lightmap: Some(LightMap {
@@ -309,7 +385,7 @@ impl RenderScene {
                         u,
                         v,
                         position: self.origin + pos.as_dvec3(),
-                        normal: Vec3::from(tri[0].normal),
+                        normal: face_normal(tri),
                     };
                     lm.texels[(y * lm.width + x) as usize] = h(&texel);
                 }
@@ -331,7 +407,7 @@ impl RenderScene {
                 let cross = (p[1] - p[0]).cross(p[2] - p[0]);
                 (
                     c,
-                    Vec3::from(t[0].normal),
+                    face_normal(t),
                     0.5 * cross.length(),
                     Vec3::from(t[0].emissive),
                 )
@@ -352,6 +428,63 @@ impl RenderScene {
             h.to_array()
         });
     }
+}
+
+/// The unit face normal of three vertices (counter-clockwise front).
+fn face_normal(t: &[Vertex]) -> Vec3 {
+    let p = [0, 1, 2].map(|k| Vec3::from(t[k].position));
+    (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero()
+}
+
+/// The renderer's materials for `scene`'s surfaces (equal ones merged), each surface's
+/// material, and each surface's vertex albedo: the reflectance, or with a base-colour texture
+/// the factor (the reflectance over the texture's mean, so factor × texture is the surface).
+fn materials(scene: &radiant_scene::Scene) -> (Vec<RenderMaterial>, Vec<u32>, Vec<[f32; 3]>) {
+    use radiant_scene::AlphaMode;
+    let mut means: Vec<Option<[f64; 4]>> = vec![None; scene.images.len()];
+    let mut list: Vec<RenderMaterial> = Vec::new();
+    let mut of_surface = Vec::with_capacity(scene.surfaces.len());
+    let mut factors = Vec::with_capacity(scene.surfaces.len());
+    for s in &scene.surfaces {
+        let tex = s
+            .base_color_texture
+            .filter(|t| (t.image as usize) < scene.images.len());
+        let m = RenderMaterial {
+            texture: tex.map(|t| t.image),
+            sampler: tex.map(|t| t.sampler).unwrap_or_default(),
+            alpha_factor: s.base_color_alpha as f32,
+            alpha_cutoff: match s.alpha {
+                AlphaMode::Opaque => None,
+                AlphaMode::Mask { cutoff } => Some(cutoff as f32),
+                AlphaMode::Blend => Some(0.5),
+            },
+            cull_back: s.double_sided,
+        };
+        let factor = match tex {
+            Some(t) => {
+                let mean = *means[t.image as usize]
+                    .get_or_insert_with(|| scene.images[t.image as usize].mean_linear());
+                std::array::from_fn(|c| {
+                    if mean[c] > 1e-9 {
+                        (s.reflectance[c] / mean[c]) as f32
+                    } else {
+                        0.0
+                    }
+                })
+            }
+            None => s.reflectance.map(|x| x as f32),
+        };
+        factors.push(factor);
+        let index = match list.iter().position(|x| *x == m) {
+            Some(i) => i,
+            None => {
+                list.push(m);
+                list.len() - 1
+            }
+        };
+        of_surface.push(index as u32);
+    }
+    (list, of_surface, factors)
 }
 
 /// Per-frame camera data as the shaders see it.
@@ -390,6 +523,22 @@ pub struct GpuLight {
     pub spot: [f32; 4],
 }
 
+/// The sky as the lighting shader sees it (48 bytes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct SkyUniform {
+    /// 0 none (black), 1 uniform, 2 gradient, 3 equirectangular image.
+    pub kind: u32,
+    /// Image width and height (texels).
+    pub size: [u32; 2],
+    /// Unused.
+    pub pad: u32,
+    /// Uniform radiance, or the zenith's.
+    pub a: [f32; 4],
+    /// The horizon's radiance.
+    pub b: [f32; 4],
+}
+
 /// The scene's GPU buffers and textures.
 pub struct GpuScene {
     /// Vertex buffer.
@@ -398,6 +547,12 @@ pub struct GpuScene {
     pub indices: wgpu::Buffer,
     /// Number of indices.
     pub index_count: u32,
+    /// One per draw range: texture, sampler, constants and indices.
+    pub materials: Vec<GpuMaterial>,
+    /// [`SkyUniform`].
+    pub sky: wgpu::Buffer,
+    /// The equirectangular sky, Rgba16Float, row 0 at the zenith (1×1 without one).
+    pub sky_image: wgpu::TextureView,
     /// Storage buffer of [`GpuLight`] (at least one zeroed entry).
     pub lights: wgpu::Buffer,
     /// Number of real lights.
@@ -440,6 +595,16 @@ fn f32_to_f16(x: f32) -> u16 {
 impl GpuScene {
     /// Uploads a scene. Refuses non-finite vertex data and lights (typed error, no NaN on the GPU).
     pub fn upload(gpu: &crate::GpuContext, scene: &RenderScene) -> Result<Self, RenderError> {
+        Self::upload_cached(gpu, scene, &mut TextureCache::new())
+    }
+
+    /// [`GpuScene::upload`], taking textures from `cache` where it has them (and leaving the
+    /// ones this scene uses in it).
+    pub fn upload_cached(
+        gpu: &crate::GpuContext,
+        scene: &RenderScene,
+        cache: &mut TextureCache,
+    ) -> Result<Self, RenderError> {
         let dev = &gpu.device;
         if scene.vertices.is_empty() || scene.indices.is_empty() {
             return Err(RenderError::EmptyScene);
@@ -451,7 +616,8 @@ impl GpuScene {
                 .chain(&v.normal)
                 .chain(&v.albedo)
                 .chain(&v.emissive)
-                .chain(&v.lightmap_uv);
+                .chain(&v.lightmap_uv)
+                .chain(&v.uv);
             if all.clone().any(|x| !x.is_finite()) {
                 return Err(RenderError::NonFinite("vertex data"));
             }
@@ -466,6 +632,42 @@ impl GpuScene {
                 vertices: scene.vertices.len(),
             });
         }
+        let whole = [DrawRange {
+            material: 0,
+            first: 0,
+            count: scene.indices.len() as u32,
+        }];
+        let draws = if scene.draws.is_empty() {
+            &whole[..]
+        } else {
+            &scene.draws[..]
+        };
+        for d in draws {
+            if u64::from(d.first) + u64::from(d.count) > scene.indices.len() as u64 {
+                return Err(RenderError::InvalidScene(format!(
+                    "draw range {}..{} is past the {} indices",
+                    d.first,
+                    u64::from(d.first) + u64::from(d.count),
+                    scene.indices.len()
+                )));
+            }
+        }
+        for t in &scene.textures {
+            if t.pixels.len() as u64 != u64::from(t.width) * u64::from(t.height) * 4
+                || t.width == 0
+                || t.height == 0
+            {
+                return Err(RenderError::InvalidScene(format!(
+                    "texture {:?} has {} bytes for {}×{} texels",
+                    t.name,
+                    t.pixels.len(),
+                    t.width,
+                    t.height
+                )));
+            }
+        }
+        let materials = cache.upload(dev, &gpu.queue, &scene.textures, &scene.materials, draws);
+        let (sky, sky_image) = upload_sky(gpu, scene.sky.as_ref())?;
         let vertices = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("scene_vertices"),
             contents: bytemuck::cast_slice(&scene.vertices),
@@ -589,6 +791,9 @@ impl GpuScene {
             vertices,
             indices,
             index_count: scene.indices.len() as u32,
+            materials,
+            sky,
+            sky_image,
             lights,
             light_count,
             lightmap: tex.create_view(&wgpu::TextureViewDescriptor::default()),
@@ -626,6 +831,79 @@ impl GpuScene {
     }
 }
 
+/// The sky's uniform and image.
+fn upload_sky(
+    gpu: &crate::GpuContext,
+    sky: Option<&Sky>,
+) -> Result<(wgpu::Buffer, wgpu::TextureView), RenderError> {
+    let rgb = |c: &[f64; 3]| [c[0] as f32, c[1] as f32, c[2] as f32, 0.0];
+    let mut u = SkyUniform::zeroed();
+    let (mut w, mut h, mut data) = (1u32, 1u32, vec![0u16; 4]);
+    match sky {
+        None => {}
+        Some(Sky::Uniform { radiance }) => {
+            u.kind = 1;
+            u.a = rgb(radiance);
+        }
+        Some(Sky::Gradient { zenith, horizon }) => {
+            u.kind = 2;
+            u.a = rgb(zenith);
+            u.b = rgb(horizon);
+        }
+        Some(Sky::Image(img)) => {
+            let max = gpu.device.limits().max_texture_dimension_2d;
+            if img.width > max || img.height > max {
+                return Err(RenderError::InvalidSize {
+                    width: img.width,
+                    height: img.height,
+                    max,
+                });
+            }
+            if img.texels.len() as u64 != u64::from(img.width) * u64::from(img.height) {
+                return Err(RenderError::NonFinite("sky image size"));
+            }
+            u.kind = 3;
+            u.size = [img.width, img.height];
+            (w, h) = (img.width, img.height);
+            data = img
+                .texels
+                .iter()
+                .flat_map(|t| [t[0], t[1], t[2], 1.0].map(f32_to_f16))
+                .collect();
+        }
+    }
+    if u.a.iter().chain(&u.b).any(|x| !x.is_finite()) {
+        return Err(RenderError::NonFinite("sky"));
+    }
+    let buffer = gpu
+        .device
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("scene_sky"),
+            contents: bytemuck::bytes_of(&u),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+    let tex = gpu.device.create_texture_with_data(
+        &gpu.queue,
+        &wgpu::TextureDescriptor {
+            label: Some("scene_sky_image"),
+            size: wgpu::Extent3d {
+                width: w,
+                height: h,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba16Float,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        },
+        wgpu::util::TextureDataOrder::LayerMajor,
+        bytemuck::cast_slice(&data),
+    );
+    Ok((buffer, tex.create_view(&Default::default())))
+}
+
 use bytemuck::Zeroable as _;
 
 #[cfg(test)]
@@ -642,6 +920,89 @@ mod tests {
                 "{x} -> {back}"
             );
         }
+    }
+
+    #[test]
+    fn materials_textures_normals_and_draws_come_from_the_scene() {
+        use radiant_scene::{AlphaMode, Image, Surface, TextureRef, Triangle};
+        // A 2 × 1 texture: sRGB 255 and 0, mean linear 0.5 in every channel.
+        let img = Image::new("t", 2, 1, vec![255, 255, 255, 255, 0, 0, 0, 0]).expect("image");
+        let tex = TextureRef {
+            image: 0,
+            sampler: Default::default(),
+            tex_coord: 0,
+            transform: radiant_scene::texture::UvTransform {
+                scale: [2.0, 2.0],
+                ..Default::default()
+            },
+        };
+        let textured = Surface {
+            name: "leaves".into(),
+            reflectance: [0.4, 0.2, 0.1],
+            base_color_texture: Some(tex),
+            alpha: AlphaMode::Mask { cutoff: 0.3 },
+            double_sided: true,
+            ..Surface::default()
+        };
+        let plain = Surface {
+            name: "wall".into(),
+            reflectance: [0.5; 3],
+            ..Surface::default()
+        };
+        let mut scene = radiant_scene::Scene {
+            surfaces: vec![plain.clone(), textured, plain],
+            images: vec![img],
+            ..Default::default()
+        };
+        for surface in [0u32, 1, 2, 1] {
+            let mut t = Triangle::new(
+                [DVec3::ZERO, DVec3::X, DVec3::Y].map(|p| p + DVec3::Z * f64::from(surface)),
+                surface,
+            );
+            t.normals[2] = Vec3::new(0.6, 0.0, 0.8);
+            t.uv[0] = [Vec2::ZERO, Vec2::X, Vec2::Y];
+            scene.triangles.push(t);
+        }
+        let rs = RenderScene::from_scene(&scene, 8).expect("convert");
+        // The two plain surfaces share one material; the textured one has its own.
+        assert_eq!(rs.materials.len(), 2);
+        let m = rs.materials[1];
+        assert_eq!(m.texture, Some(0));
+        assert_eq!(m.alpha_cutoff, Some(0.3));
+        assert!(m.cull_back && !rs.materials[0].cull_back);
+        // Factor × texture mean is the surface's reflectance.
+        let v = &rs.vertices[3];
+        for (c, want) in [0.4f32, 0.2, 0.1].iter().enumerate() {
+            assert!((v.albedo[c] * 0.5 - want).abs() < 1e-6, "{:?}", v.albedo);
+        }
+        // Texture coordinates with the transform, smooth normals per vertex.
+        assert_eq!(rs.vertices[4].uv, [2.0, 0.0]);
+        assert_eq!(rs.vertices[5].normal, [0.6, 0.0, 0.8]);
+        assert_eq!(rs.vertices[4].normal, [0.0, 0.0, 1.0]);
+        // Every triangle drawn exactly once, grouped by material.
+        let mut seen: Vec<u32> = rs.indices.clone();
+        seen.sort_unstable();
+        assert_eq!(seen, (0..12).collect::<Vec<_>>());
+        assert_eq!(rs.draws.len(), 2);
+        assert_eq!(rs.draws.iter().map(|d| d.count).sum::<u32>(), 12);
+        for d in &rs.draws {
+            for &i in &rs.indices[d.first as usize..(d.first + d.count) as usize] {
+                let surface = scene.triangles[i as usize / 3].surface;
+                assert_eq!(d.material, u32::from(surface == 1));
+            }
+        }
+    }
+
+    #[test]
+    fn many_triangles_get_a_smaller_light_map_cell_not_a_larger_map() {
+        let mut scene = radiant_scene::builtin("cornell-box").expect("builtin");
+        let t = scene.triangles[0];
+        // As many as Sponza: 512 × 512 charts; a 32-texel cell would need 16384² texels.
+        scene.triangles = vec![t; 1 << 18];
+        let rs = RenderScene::from_scene(&scene, 32).expect("convert");
+        let lm = rs.lightmap.as_ref().expect("light map");
+        assert!(u64::from(lm.width) * u64::from(lm.height) <= MAX_LIGHTMAP_TEXELS);
+        assert_eq!((lm.width, lm.height), (512 * 5, 512 * 5));
     }
 
     #[test]

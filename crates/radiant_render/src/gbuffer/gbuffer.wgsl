@@ -1,11 +1,25 @@
 // G-buffer pass of a deferred renderer (Saito & Takahashi 1990; Deering et al. 1988): one
 // geometry pass writes albedo, an octahedral normal, material, the baked light-map irradiance
 // (sampled on the second UV set) and emission; depth goes to Depth32Float and positions are
-// reconstructed from it later. Geometry is two-sided: back faces flip their normal.
+// reconstructed from it later. Geometry is two-sided: back faces flip their normal, except for
+// double-sided materials, whose back is a separate twin (their back faces are discarded).
+// Group 1 is the material: the base-colour texture (sRGB, mipmapped, anisotropic; 1×1 white
+// without one) multiplies the vertex albedo, and alpha below the cut-off is discarded.
 
 @group(0) @binding(0) var<uniform> camera: Camera;
 @group(0) @binding(1) var lightmap: texture_2d<f32>;
 @group(0) @binding(2) var lightmap_sampler: sampler;
+@group(1) @binding(0) var base_color: texture_2d<f32>;
+@group(1) @binding(1) var base_color_sampler: sampler;
+@group(1) @binding(2) var<uniform> material: Material;
+
+struct Material {
+    // Discard below this alpha (-1: never).
+    alpha_cutoff: f32,
+    alpha_factor: f32,
+    cull_back: u32,
+    _pad: u32,
+};
 
 struct VertexIn {
     @location(0) position: vec3<f32>,
@@ -13,6 +27,7 @@ struct VertexIn {
     @location(2) albedo: vec3<f32>,
     @location(3) emissive: vec3<f32>,
     @location(4) lightmap_uv: vec2<f32>,
+    @location(5) uv: vec2<f32>,
 };
 
 struct VertexOut {
@@ -21,6 +36,7 @@ struct VertexOut {
     @location(1) albedo: vec3<f32>,
     @location(2) emissive: vec3<f32>,
     @location(3) lightmap_uv: vec2<f32>,
+    @location(4) uv: vec2<f32>,
 };
 
 @vertex
@@ -31,6 +47,7 @@ fn gbuffer_vs(v: VertexIn) -> VertexOut {
     out.albedo = v.albedo;
     out.emissive = v.emissive;
     out.lightmap_uv = v.lightmap_uv;
+    out.uv = v.uv;
     return out;
 }
 
@@ -44,13 +61,21 @@ struct GBufferOut {
 
 @fragment
 fn gbuffer_fs(in: VertexOut, @builtin(front_facing) front: bool) -> GBufferOut {
+    // Sampled before any discard: implicit derivatives need uniform control flow.
+    let texel = textureSample(base_color, base_color_sampler, in.uv);
+    if (!front && material.cull_back != 0u) {
+        discard;
+    }
+    if (material.alpha_factor * texel.a < material.alpha_cutoff) {
+        discard;
+    }
     let len = length(in.normal);
     var n = select(vec3<f32>(0.0, 0.0, 1.0), in.normal / len, len > 1e-20);
     if (!front) {
         n = -n;
     }
     var out: GBufferOut;
-    out.albedo = vec4<f32>(in.albedo, 1.0);
+    out.albedo = vec4<f32>(in.albedo * texel.rgb, 1.0);
     out.normal = oct_encode(n);
     // r: roughness (Lambertian: 1), g: light-map coverage (every surface has a chart: 1).
     out.material = vec2<f32>(1.0, 1.0);

@@ -41,6 +41,7 @@ pub struct GBuffer {
 /// The G-buffer pipeline and its bind-group layout.
 pub struct GBufferPipeline {
     layout: wgpu::BindGroupLayout,
+    material_layout: wgpu::BindGroupLayout,
     pipeline: wgpu::RenderPipeline,
 }
 
@@ -64,13 +65,27 @@ impl GBufferPipeline {
                 },
             ],
         });
+        let material_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("gbuffer_material_layout"),
+            entries: &[
+                crate::util::texture_entry(0, wgpu::TextureSampleType::Float { filterable: true }),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+                crate::util::uniform_entry(2, wgpu::ShaderStages::FRAGMENT),
+            ],
+        });
         let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("gbuffer_pipeline_layout"),
-            bind_group_layouts: &[Some(&layout)],
+            bind_group_layouts: &[Some(&layout), Some(&material_layout)],
             immediate_size: 0,
         });
         let attributes = wgpu::vertex_attr_array![
-            0 => Float32x3, 1 => Float32x3, 2 => Float32x3, 3 => Float32x3, 4 => Float32x2
+            0 => Float32x3, 1 => Float32x3, 2 => Float32x3, 3 => Float32x3, 4 => Float32x2,
+            5 => Float32x2
         ];
         let target = |format| {
             Some(wgpu::ColorTargetState {
@@ -119,7 +134,11 @@ impl GBufferPipeline {
             multiview_mask: None,
             cache: None,
         });
-        Self { layout, pipeline }
+        Self {
+            layout,
+            material_layout,
+            pipeline,
+        }
     }
 }
 
@@ -184,6 +203,30 @@ pub fn gbuffer_pass(
                 },
             ],
         });
+        let materials: Vec<wgpu::BindGroup> = scene
+            .materials
+            .iter()
+            .map(|m| {
+                ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("gbuffer_material"),
+                    layout: &pipeline.material_layout,
+                    entries: &[
+                        wgpu::BindGroupEntry {
+                            binding: 0,
+                            resource: wgpu::BindingResource::TextureView(&m.texture),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 1,
+                            resource: wgpu::BindingResource::Sampler(&m.sampler),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: m.uniform.as_entire_binding(),
+                        },
+                    ],
+                })
+            })
+            .collect();
         let color = |h| {
             Some(wgpu::RenderPassColorAttachment {
                 view: ctx.view(h),
@@ -222,7 +265,10 @@ pub fn gbuffer_pass(
         pass.set_bind_group(0, &bind, &[]);
         pass.set_vertex_buffer(0, scene.vertices.slice(..));
         pass.set_index_buffer(scene.indices.slice(..), wgpu::IndexFormat::Uint32);
-        pass.draw_indexed(0..scene.index_count, 0, 0..1);
+        for (m, bind) in scene.materials.iter().zip(&materials) {
+            pass.set_bind_group(1, bind, &[]);
+            pass.draw_indexed(m.first..m.first + m.count, 0, 0..1);
+        }
     });
     g
 }

@@ -3,6 +3,8 @@
 // then shades its pixels with the survivors. Output radiance, linear HDR:
 //   direct (Lambertian, KHR_lights_punctual units) + albedo * light-map H * AO + emission.
 // Range falloff is KHR_lights_punctual's recommended window; punctual lights cast no shadows.
+// Where no geometry is, the sky's radiance in the pixel's direction (radiant_scene::Sky's
+// mapping: +Y up, the gradient linear in sin(elevation), the image equirectangular, nearest).
 
 @group(0) @binding(0) var<uniform> camera: Camera;
 @group(0) @binding(1) var<storage, read> lights: array<Light>;
@@ -15,6 +17,33 @@
 @group(0) @binding(8) var ao_texture: texture_2d<f32>;
 @group(0) @binding(9) var out_radiance: texture_storage_2d<rgba16float, write>;
 @group(0) @binding(10) var<uniform> settings: LightingSettings;
+@group(0) @binding(11) var<uniform> sky: Sky;
+@group(0) @binding(12) var sky_image: texture_2d<f32>;
+
+struct Sky {
+    // 0 none, 1 uniform, 2 gradient, 3 image.
+    kind: u32,
+    width: u32,
+    height: u32,
+    _pad: u32,
+    a: vec4<f32>,
+    b: vec4<f32>,
+};
+
+fn sky_radiance(dir: vec3<f32>) -> vec3<f32> {
+    switch sky.kind {
+        case 1u: { return sky.a.rgb; }
+        case 2u: { return mix(sky.b.rgb, sky.a.rgb, clamp(dir.y, 0.0, 1.0)); }
+        case 3u: {
+            let u = 0.5 + atan2(dir.x, -dir.z) / (2.0 * PI);
+            let v = acos(clamp(dir.y, -1.0, 1.0)) / PI;
+            let size = vec2<u32>(sky.width, sky.height);
+            let xy = min(vec2<u32>(max(vec2<f32>(u, v) * vec2<f32>(size), vec2<f32>(0.0))), size - vec2<u32>(1u));
+            return textureLoad(sky_image, vec2<i32>(xy), 0).rgb;
+        }
+        default: { return vec3<f32>(0.0); }
+    }
+}
 
 struct Light {
     position_range: vec4<f32>,
@@ -134,7 +163,15 @@ fn lighting_main(
         return;
     }
     if (depth >= 1.0) {
-        textureStore(out_radiance, coord, vec4<f32>(0.0, 0.0, 0.0, 1.0));
+        let uv = (vec2<f32>(coord) + 0.5) * camera.viewport.zw;
+        let far = camera.inv_view_proj * vec4<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, 1.0, 1.0);
+        let dir = normalize(far.xyz / far.w - camera.position.xyz);
+        var background = sky_radiance(dir);
+        // Debug views show their input, which the sky has none of.
+        if (settings.debug_view != 0u) {
+            background = vec3<f32>(0.0);
+        }
+        textureStore(out_radiance, coord, vec4<f32>(background, 1.0));
         return;
     }
 

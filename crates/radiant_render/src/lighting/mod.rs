@@ -1,4 +1,5 @@
-//! Tiled deferred lighting: punctual lights, light-map irradiance × albedo × AO, emission.
+//! Tiled deferred lighting: punctual lights, light-map irradiance × albedo × AO, emission; the
+//! sky where no geometry is.
 
 use std::sync::Arc;
 
@@ -133,6 +134,8 @@ impl LightingPipeline {
             count: None,
         });
         entries.push(uniform_entry(10, wgpu::ShaderStages::COMPUTE));
+        entries.push(uniform_entry(11, wgpu::ShaderStages::COMPUTE));
+        entries.push(texture_entry(12, float));
         for e in &mut entries {
             e.visibility = wgpu::ShaderStages::COMPUTE;
         }
@@ -250,6 +253,11 @@ pub fn lighting_pass(
                     binding: 10,
                     resource: settings.as_entire_binding(),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 11,
+                    resource: scene.sky.as_entire_binding(),
+                },
+                view(12, &scene.sky_image),
             ],
         });
         let mut pass = ctx
