@@ -149,7 +149,13 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     }
     ensure_dir(&args.out)?;
 
-    let clustered = use_clustered(args, &scene, &params)?;
+    let clustered = use_clustered(
+        &args.hierarchy,
+        args.spectral,
+        args.checkpoint.is_some(),
+        &scene,
+        &params,
+    )?;
     let result = if clustered {
         bake_clustered(&scene, &params, &args.hierarchy)?
     } else {
@@ -403,26 +409,18 @@ pub fn run_default() -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `--hierarchy auto`'s size rule: a scene with more than 4096 triangles, or whose
-/// per-triangle mesh would have more than 65 536 elements, bakes clustered.
-pub(crate) fn is_level(
-    scene: &radiant::scene::Scene,
-    params: &radiant::radiosity::BakeParams,
-) -> anyhow::Result<bool> {
-    Ok(scene.triangles.len() > 4096
-        || radiant::radiosity::Mesh::count_elements(scene, &params.mesh)? > 65_536)
-}
-
 /// Whether this bake uses the clustered hierarchy (see `--hierarchy`).
-fn use_clustered(
-    args: &BakeArgs,
+pub(crate) fn use_clustered(
+    hierarchy: &crate::HierarchyArgs,
+    spectral: bool,
+    checkpoint: bool,
     scene: &radiant::scene::Scene,
     params: &radiant::radiosity::BakeParams,
 ) -> anyhow::Result<bool> {
     use radiant::radiosity::{FormFactorKind, SolverKind};
     let needs_triangles = [
-        (args.spectral, "--spectral"),
-        (args.checkpoint.is_some(), "--checkpoint"),
+        (spectral, "--spectral"),
+        (checkpoint, "--checkpoint"),
         (
             !matches!(params.solver, SolverKind::GaussSeidel | SolverKind::Jacobi),
             "--method southwell or direct",
@@ -439,7 +437,7 @@ fn use_clustered(
         .iter()
         .find(|(on, _)| *on)
         .map(|(_, what)| *what);
-    match args.hierarchy.hierarchy.as_str() {
+    match hierarchy.hierarchy.as_str() {
         "triangles" => Ok(false),
         "clustered" => match needed {
             Some(what) => anyhow::bail!(
@@ -451,13 +449,13 @@ fn use_clustered(
             if needed.is_some() {
                 return Ok(false);
             }
-            is_level(scene, params)
+            Ok(radiant::radiosity::cluster::is_level(scene, params)?)
         }
     }
 }
 
 /// A bake with the clustered hierarchy, with progress on a terminal and in the log.
-fn bake_clustered(
+pub(crate) fn bake_clustered(
     scene: &radiant::scene::Scene,
     params: &radiant::radiosity::BakeParams,
     h: &crate::HierarchyArgs,
@@ -504,7 +502,7 @@ fn bake_clustered(
 }
 
 /// A bake with the per-triangle hierarchy, resuming from and writing `checkpoint`.
-fn bake_triangles(
+pub(crate) fn bake_triangles(
     scene: &radiant::scene::Scene,
     params: &radiant::radiosity::BakeParams,
     checkpoint: Option<&Path>,

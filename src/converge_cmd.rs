@@ -40,7 +40,7 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
     let clustered = match args.hierarchy.as_str() {
         "clustered" => true,
         "triangles" => false,
-        _ => crate::bake_cmd::is_level(
+        _ => radiant::radiosity::cluster::is_level(
             &scene,
             &args
                 .solve

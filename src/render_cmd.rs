@@ -8,7 +8,6 @@ use anyhow::Context;
 use clap::Args;
 use radiant::color::Tonemap;
 use radiant::post::frame::{FrameRenderer, FrameSettings};
-use radiant::radiosity::BakeEvent;
 use radiant::render::GpuContext;
 use radiant::render::capture::{write_exr, write_png};
 use radiant::render::lighting::DebugView;
@@ -72,6 +71,8 @@ pub(crate) struct RenderArgs {
     pub(crate) timings: usize,
     #[command(flatten)]
     pub(crate) solve: SolveArgs,
+    #[command(flatten)]
+    pub(crate) hierarchy: crate::HierarchyArgs,
 }
 
 fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
@@ -137,15 +138,18 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
 
     // No emitters: nothing to bake, and nothing is allocated for it.
     let bake = if scene.has_emitters() {
-        let (bake, pb) = crate::start_bake(&scene, &params, args.checkpoint.as_deref())?;
-        let result = bake.run_to_end(&mut |BakeEvent::Solve(p, _)| {
-            pb.set_message(format!("solving, residual {:.1e}", p.residual));
-        })?;
-        pb.finish_and_clear();
-        if let Some(path) = &args.checkpoint {
-            result.write_checkpoint(path)?;
-        }
-        Some(result)
+        let clustered = crate::bake_cmd::use_clustered(
+            &args.hierarchy,
+            false,
+            args.checkpoint.is_some(),
+            &scene,
+            &params,
+        )?;
+        Some(if clustered {
+            crate::bake_cmd::bake_clustered(&scene, &params, &args.hierarchy)?
+        } else {
+            crate::bake_cmd::bake_triangles(&scene, &params, args.checkpoint.as_deref())?
+        })
     } else {
         println!("{source}: no emitters, so no bake; the frame shows punctual lights and emission");
         None

@@ -286,6 +286,10 @@ enum Outcome {
     Cancelled,
     NeedsRebuild,
     Failed(String),
+    /// A level's clustered bake finished at this epoch; it keeps nothing to edit.
+    Finished(u64),
+    /// A level's clustered bake stopped for a pause (`true`) and must start over to resume.
+    Stopped(bool),
 }
 
 enum Start {
@@ -408,6 +412,11 @@ fn work(
     };
     let (publish_interval, mut epoch) = (setup.publish_interval, setup.epoch);
     let mut bake = match start {
+        Start::Build(scene)
+            if radiant_radiosity::cluster::suits(&scene, &setup.params).unwrap_or(false) =>
+        {
+            return work_clustered(&scene, &setup, rx, &tx);
+        }
         Start::Build(scene) => match build(&scene, &setup, &tx) {
             Ok(b) => {
                 send(Report::Built {
@@ -516,6 +525,125 @@ fn work(
         if done {
             return Outcome::Done(bake, epoch);
         }
+    }
+}
+
+/// Why a clustered bake was stopped, strongest last.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum StopReason {
+    Edit,
+    Pause,
+    Cancel,
+}
+
+/// A level's bake (more than 4096 triangles or 65 536 per-triangle elements; see
+/// `radiant_radiosity::cluster::suits`): the clustered hierarchy, which keeps no links to
+/// edit. Its light is published as it converges, as the per-triangle bake's is; an edit, a
+/// pause or a cancel stops it (checked while links are refined and after every sweep), and an
+/// edit or a resume bakes again from the start. No checkpoint is written.
+fn work_clustered(
+    scene: &Scene,
+    setup: &WorkerSetup,
+    rx: mpsc::Receiver<Control>,
+    tx: &mpsc::Sender<Report>,
+) -> Outcome {
+    use radiant_radiosity::cluster::{self, ClusterParams, Phase, Sweep, Watch};
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let stop = AtomicBool::new(false);
+    let reason: Mutex<Option<StopReason>> = Mutex::new(None);
+    let rx = Mutex::new(rx);
+    let note = |r: StopReason| {
+        if let Ok(mut g) = reason.lock() {
+            *g = (*g).max(Some(r));
+        }
+        stop.store(true, Ordering::Relaxed);
+    };
+    let poll = || {
+        if setup.cancelled.load(Ordering::Relaxed) {
+            note(StopReason::Cancel);
+        }
+        if let Ok(rx) = rx.try_lock() {
+            while let Ok(c) = rx.try_recv() {
+                note(match c {
+                    Control::Cancel => StopReason::Cancel,
+                    Control::Pause => StopReason::Pause,
+                    Control::Edit(..) => StopReason::Edit,
+                });
+            }
+        }
+    };
+    let progress = |phase: Phase, done: usize, total: usize| {
+        if phase == Phase::Links {
+            let _ = tx.send(Report::Building(done, total));
+        }
+        poll();
+    };
+    let built = |mesh: &Mesh, links: usize| Report::Built {
+        mesh: Arc::new(mesh.clone()),
+        links,
+        contraction: 0.0,
+        resumed: false,
+    };
+    let t0 = Instant::now();
+    let mut sent_built = false;
+    let mut last_publish: Option<Instant> = None;
+    let mut on_sweep = |s: &Sweep<'_>| {
+        if !sent_built {
+            let _ = tx.send(built(s.mesh, s.links));
+            sent_built = true;
+        }
+        // The residual is already an error estimate: contraction 0 above keeps it as is.
+        let _ = tx.send(Report::Step {
+            t: t0.elapsed().as_secs_f64(),
+            iterations: s.iterations,
+            residual: s.residual,
+        });
+        if last_publish.is_none_or(|t| t.elapsed() >= setup.publish_interval) {
+            let _ = tx.send(Report::Publish {
+                radiosity: s.radiosity.to_vec(),
+                reflectance: s.reflectance.to_vec(),
+                surfaces: surface_means(&scene.surfaces, s.mesh, s.radiosity),
+                epoch: setup.epoch,
+                converged: false,
+            });
+            last_publish = Some(Instant::now());
+        }
+        poll();
+    };
+    let watch = Watch {
+        stop: Some(&stop),
+        on_sweep: Some(&mut on_sweep),
+    };
+    let result = cluster::bake_watched(
+        scene,
+        &setup.params,
+        &ClusterParams::default(),
+        &progress,
+        watch,
+    );
+    match result {
+        Ok(r) => {
+            if !sent_built {
+                let _ = tx.send(built(&r.mesh, r.report.links));
+            }
+            if let Some(w) = r.report.warnings.last() {
+                let _ = tx.send(Report::Warning(w.clone()));
+            }
+            let _ = tx.send(Report::Publish {
+                reflectance: r.system.rho.clone(),
+                radiosity: r.radiosity,
+                surfaces: r.surfaces,
+                epoch: setup.epoch,
+                converged: true,
+            });
+            Outcome::Finished(setup.epoch)
+        }
+        Err(radiant_radiosity::BakeError::Stopped) => match reason.lock().ok().and_then(|g| *g) {
+            Some(StopReason::Edit) => Outcome::NeedsRebuild,
+            Some(StopReason::Pause) => Outcome::Stopped(true),
+            Some(StopReason::Cancel) | None => Outcome::Cancelled,
+        },
+        Err(e) => Outcome::Failed(e.to_string()),
     }
 }
 
@@ -790,6 +918,20 @@ pub fn drive_bake(world: &mut World) {
                 requeue_lost_edit(world, epoch);
             }
             Outcome::Cancelled => {}
+            Outcome::Finished(epoch) => {
+                // An edit that arrived after the bake's last look: bake the scene as it is now.
+                if epoch < world.resource::<BakeWorker>().epoch {
+                    let scene = Arc::new(gather_scene(world));
+                    world.resource_mut::<BakeWorker>().rebuild = Some(scene);
+                }
+            }
+            Outcome::Stopped(paused) => {
+                let scene = Arc::new(gather_scene(world));
+                world.resource_mut::<BakeWorker>().rebuild = Some(scene);
+                if paused {
+                    world.resource_mut::<BakeStatus>().phase = BakePhase::Paused;
+                }
+            }
             Outcome::NeedsRebuild => {
                 let scene = Arc::new(gather_scene(world));
                 world.resource_mut::<BakeWorker>().rebuild = Some(scene);

@@ -455,3 +455,67 @@ fn removing_and_adding_static_entities_edits_the_bake_without_a_rebuild() {
         assert_surfaces_close(&app, &want, 1e-4);
     }
 }
+
+/// The Cornell box with every triangle split into 256: 9 728 triangles, a level by
+/// `radiant_radiosity::cluster::suits`, so the world bakes it with the clustered hierarchy.
+fn level_app() -> (App, radiant_scene::Scene) {
+    let mut app = App::new();
+    app.add_plugins(RadiantPlugins)
+        .insert_resource(RadiosityBake {
+            params: params(),
+            ..RadiosityBake::default()
+        });
+    let box_ = radiant_scene::builtin("cornell-box").expect("builtin");
+    let fine = radiant_radiosity::scenes::tessellated(&box_, 4);
+    spawn_scene(&mut app.world, &fine);
+    (app, fine)
+}
+
+fn clustered(scene: &radiant_scene::Scene) -> radiant_radiosity::BakeResult {
+    use radiant_radiosity::cluster;
+    cluster::bake(
+        scene,
+        &params(),
+        &cluster::ClusterParams::default(),
+        &|_, _, _| {},
+    )
+    .expect("clustered bake")
+}
+
+#[test]
+fn a_level_bakes_clustered_in_the_world_and_an_edit_bakes_it_again() {
+    let (mut app, fine) = level_app();
+    assert!(radiant_radiosity::cluster::suits(&fine, &params()).expect("count"));
+    // Pausing stops the clustered bake (it keeps nothing to resume from); resuming starts over.
+    app.run_until(100_000, Duration::from_millis(1), |w| {
+        w.resource::<BakeStatus>().phase == BakePhase::Building
+    });
+    app.world.resource_mut::<BakeControl>().pause();
+    app.run_until(100_000, Duration::from_millis(1), |w| {
+        w.resource::<BakeStatus>().phase == BakePhase::Paused
+            && !w.resource::<BakeWorker>().is_running()
+    });
+    assert_eq!(app.world.resource::<BakeStatus>().phase, BakePhase::Paused);
+    app.world.resource_mut::<BakeControl>().resume();
+    converge(&mut app);
+    let want = clustered(&gather_scene(&mut app.world));
+    let status = app.world.resource::<BakeStatus>().clone();
+    assert_eq!(status.elements, want.report.elements);
+    assert_eq!(status.links, want.report.links);
+    assert!(status.history.len() >= 2, "{status:?}");
+    // Published as it converged (after the first sweep), then at the end; the same answer as
+    // the CLI's clustered bake.
+    let lit = app.world.resource::<BakedLighting>().clone();
+    assert!(lit.generation >= 2, "{} publications", lit.generation);
+    assert_eq!(*lit.radiosity, want.radiosity);
+    assert_eq!(*lit.reflectance, want.system.rho);
+    assert_surfaces_close(&app, &want, 1e-12);
+    // A material edit bakes the level again.
+    let builds = status.builds;
+    set_material(&mut app, "left_wall", |m| m.reflectance = [0.1, 0.2, 0.7]);
+    app.update();
+    converge(&mut app);
+    assert!(app.world.resource::<BakeStatus>().builds > builds);
+    let want = clustered(&gather_scene(&mut app.world));
+    assert_surfaces_close(&app, &want, 1e-12);
+}

@@ -980,7 +980,10 @@ fn a_textured_masked_quad_renders_its_texture_and_its_cut_out() {
     let rs = masked_quad_scene();
     let mut frame = FrameRenderer::new(&gpu, &rs).expect("renderer");
     let (w, h) = (160u32, 160u32);
-    let img = frame.capture(&gpu, w, h, &albedo_view()).expect("capture").hdr;
+    let img = frame
+        .capture(&gpu, w, h, &albedo_view())
+        .expect("capture")
+        .hdr;
     let (mut texture, mut cut) = (0, 0);
     for y in 0..h {
         for x in 0..w {
@@ -1012,11 +1015,16 @@ fn a_textured_masked_quad_renders_its_texture_and_its_cut_out() {
             }
         }
     }
-    assert!(texture > 2000 && cut > 2000, "{texture} textured, {cut} cut");
+    assert!(
+        texture > 2000 && cut > 2000,
+        "{texture} textured, {cut} cut"
+    );
     // A new light map uploads the scene again, not its texture.
     let uploads = frame.material_texture_uploads();
     frame.set_scene(&gpu, &rs).expect("again");
-    frame.capture(&gpu, 32, 32, &albedo_view()).expect("capture");
+    frame
+        .capture(&gpu, 32, 32, &albedo_view())
+        .expect("capture");
     assert_eq!((uploads, frame.material_texture_uploads()), (1, 1));
 }
 
@@ -1057,7 +1065,10 @@ fn a_mipmapped_texture_far_away_shows_its_linear_mean() {
         count: 6,
     }];
     let mut frame = FrameRenderer::new(&gpu, &rs).expect("renderer");
-    let img = frame.capture(&gpu, 64, 64, &albedo_view()).expect("capture").hdr;
+    let img = frame
+        .capture(&gpu, 64, 64, &albedo_view())
+        .expect("capture")
+        .hdr;
     // The quad covers about 45 × 45 pixels: 5.7 texels per pixel.
     let c = img.at(32, 32);
     assert!((c[0] - 0.5).abs() < 0.03, "centre albedo {c:?}");
@@ -1134,7 +1145,10 @@ fn a_double_sided_surface_shows_its_own_side_from_each() {
             count: 12,
         }];
         let mut frame = FrameRenderer::new(&gpu, &rs).expect("renderer");
-        let img = frame.capture(&gpu, 32, 32, &albedo_view()).expect("capture").hdr;
+        let img = frame
+            .capture(&gpu, 32, 32, &albedo_view())
+            .expect("capture")
+            .hdr;
         let want = if view_from > 0.0 { 0.8 } else { 0.1 };
         for y in 8..24 {
             for x in 8..24 {
@@ -1187,7 +1201,12 @@ fn the_sky_is_seen_behind_the_scene() {
     ];
     let (w, h) = (64u32, 48u32);
     for sky in skies {
-        let mut rs = scene(v.clone(), Vec3::new(0.0, 0.3, 3.0), Vec3::new(0.0, 0.5, 0.0), 1.0);
+        let mut rs = scene(
+            v.clone(),
+            Vec3::new(0.0, 0.3, 3.0),
+            Vec3::new(0.0, 0.5, 0.0),
+            1.0,
+        );
         rs.camera.far = 50.0;
         rs.sky = Some(sky.clone());
         let mut frame = FrameRenderer::new(&gpu, &rs).expect("renderer");
@@ -1205,15 +1224,23 @@ fn the_sky_is_seen_behind_the_scene() {
                 let want = sky.radiance(pixel_dir(&rs.camera, w, h, x, y).as_dvec3());
                 let got = img.at(x, y);
                 sky_px += 1;
-                let close = (0..3).all(|c| (f64::from(got[c]) - want[c]).abs() <= 2e-3 * want[c].max(1.0));
+                let close =
+                    (0..3).all(|c| (f64::from(got[c]) - want[c]).abs() <= 2e-3 * want[c].max(1.0));
                 if !close {
                     off += 1;
                 }
             }
         }
         // The image sky is sampled nearest: a pixel on a texel edge may take its neighbour.
-        let allowed = if matches!(sky, radiant_scene::Sky::Image(_)) { sky_px / 20 } else { 0 };
-        assert!(off <= allowed, "{sky:?}: {off} of {sky_px} sky pixels differ");
+        let allowed = if matches!(sky, radiant_scene::Sky::Image(_)) {
+            sky_px / 20
+        } else {
+            0
+        };
+        assert!(
+            off <= allowed,
+            "{sky:?}: {off} of {sky_px} sky pixels differ"
+        );
     }
 }
 

@@ -105,6 +105,9 @@ pub enum BakeError {
     /// A checkpoint could not be written, read, or does not fit this scene.
     #[error("checkpoint: {0}")]
     Checkpoint(String),
+    /// The caller stopped the bake (a clustered bake's [`cluster::Watch::stop`]).
+    #[error("the bake was stopped before it finished")]
+    Stopped,
 }
 
 #[cfg(test)]

@@ -231,7 +231,10 @@ impl TextureCache {
         }
         let mut out = Vec::with_capacity(draws.len());
         for d in draws {
-            let m = materials.get(d.material as usize).copied().unwrap_or_default();
+            let m = materials
+                .get(d.material as usize)
+                .copied()
+                .unwrap_or_default();
             let texture = match m.texture.and_then(|i| textures.get(i as usize)) {
                 Some(t) => self.texture(device, queue, t),
                 None => self.white(device, queue),

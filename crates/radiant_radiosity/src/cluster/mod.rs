@@ -31,6 +31,7 @@ pub mod sh;
 pub mod solve;
 pub mod tree;
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use radiant_scene::Scene;
@@ -154,15 +155,80 @@ pub enum Phase {
     Solve,
 }
 
-/// Bakes `scene` with the clustered hierarchy. `params` gives the meshing (element size =
-/// patch size / 2^element levels), the threshold (`links.refinement`), the form-factor method
-/// (analytic or ray-cast between triangles), the seed, the tolerance and the time limit.
-/// `progress(phase, done, total)` is called as the bake advances, also from worker threads.
+/// The state of a clustered bake after one sweep, for [`Watch::on_sweep`].
+pub struct Sweep<'a> {
+    /// The element hierarchy.
+    pub mesh: &'a Mesh,
+    /// Radiosity per element after the sweep.
+    pub radiosity: &'a [Rgb],
+    /// Reflectance per element.
+    pub reflectance: &'a [Rgb],
+    /// Sweeps so far.
+    pub iterations: u64,
+    /// The estimated relative error of `radiosity` (the bake's residual).
+    pub residual: f64,
+    /// Links.
+    pub links: usize,
+    /// Seconds since the bake started.
+    pub seconds: f64,
+}
+
+/// Hooks into a running clustered bake: a live view of its solution, and a way to stop it.
+#[derive(Default)]
+pub struct Watch<'a> {
+    /// Set to stop the bake: checked while links are refined and between sweeps; the bake
+    /// then returns [`BakeError::Stopped`].
+    pub stop: Option<&'a AtomicBool>,
+    /// Called after every sweep (from the thread that called [`bake_watched`]).
+    pub on_sweep: Option<&'a mut dyn FnMut(&Sweep<'_>)>,
+}
+
+impl Watch<'_> {
+    fn stopped(&self) -> bool {
+        self.stop.is_some_and(|f| f.load(Ordering::Relaxed))
+    }
+}
+
+/// `--hierarchy auto`'s rule: a scene with more than 4096 triangles, or whose per-triangle mesh
+/// would have more than 65 536 elements, is a level and bakes clustered, when `params` are
+/// ones the clustered hierarchy supports (Jacobi or Gauss–Seidel, analytic or ray-cast form
+/// factors; it solves with Jacobi sweeps either way).
+pub fn suits(scene: &Scene, params: &BakeParams) -> Result<bool, BakeError> {
+    let supported = matches!(params.solver, SolverKind::GaussSeidel | SolverKind::Jacobi)
+        && matches!(
+            params.form_factors,
+            FormFactorKind::Analytic | FormFactorKind::RayCast
+        );
+    Ok(supported && is_level(scene, params)?)
+}
+
+/// The size half of [`suits`]: more than 4096 triangles, or more than 65 536 elements in the
+/// per-triangle mesh.
+pub fn is_level(scene: &Scene, params: &BakeParams) -> Result<bool, BakeError> {
+    Ok(scene.triangles.len() > 4096 || Mesh::count_elements(scene, &params.mesh)? > 65_536)
+}
+
+/// Bakes `scene` with the clustered hierarchy (see [`bake_watched`]).
 pub fn bake(
     scene: &Scene,
     params: &BakeParams,
     cp: &ClusterParams,
     progress: &(dyn Fn(Phase, usize, usize) + Sync),
+) -> Result<BakeResult, BakeError> {
+    bake_watched(scene, params, cp, progress, Watch::default())
+}
+
+/// Bakes `scene` with the clustered hierarchy. `params` gives the meshing (element size =
+/// patch size / 2^element levels), the threshold (`links.refinement`), the form-factor method
+/// (analytic or ray-cast between triangles), the seed, the tolerance and the time limit.
+/// `progress(phase, done, total)` is called as the bake advances, also from worker threads.
+/// `watch` sees the solution after every sweep and can stop the bake.
+pub fn bake_watched(
+    scene: &Scene,
+    params: &BakeParams,
+    cp: &ClusterParams,
+    progress: &(dyn Fn(Phase, usize, usize) + Sync),
+    mut watch: Watch<'_>,
 ) -> Result<BakeResult, BakeError> {
     let started = Instant::now();
     let static_part;
@@ -232,6 +298,7 @@ pub fn bake(
             &mut budget,
             &mut warnings,
             progress,
+            watch.stop,
         )?
     } else {
         (Vec::new(), params.links.refinement)
@@ -290,6 +357,20 @@ pub fn bake(
             unshot_fraction: 0.0,
         });
         progress(Phase::Solve, iterations as usize, cp.max_sweeps as usize);
+        if let Some(f) = watch.on_sweep.as_mut() {
+            f(&Sweep {
+                mesh: &mesh,
+                radiosity: &b,
+                reflectance: &sys.rho,
+                iterations,
+                residual,
+                links: sys.links(),
+                seconds: started.elapsed().as_secs_f64(),
+            });
+        }
+        if watch.stopped() {
+            return Err(BakeError::Stopped);
+        }
         if residual <= tol && iterations >= 2 {
             converged = true;
             break;
@@ -403,6 +484,7 @@ fn links(
     budget: &mut Budget,
     warnings: &mut Vec<String>,
     progress: &(dyn Fn(Phase, usize, usize) + Sync),
+    stop: Option<&AtomicBool>,
 ) -> Result<(Vec<Vec<refine::Link>>, f64), BakeError> {
     let max3 = |v: &Rgb| v[0].max(v[1]).max(v[2]);
     let (bmesh, _) = crate::bake::estimates(mesh, rho, source, 1.0);
@@ -450,6 +532,7 @@ fn links(
             samples: cp.samples,
             seed: params.ff.seed,
             max_links,
+            stop,
         };
         let t = Instant::now();
         if let Some(parts) = r.build(&|d, n| progress(Phase::Links, d, n)) {
@@ -462,6 +545,9 @@ fn links(
                 ));
             }
             return Ok((parts, eps));
+        }
+        if stop.is_some_and(|f| f.load(Ordering::Relaxed)) {
+            return Err(BakeError::Stopped);
         }
         tracing::warn!(
             refinement = eps,

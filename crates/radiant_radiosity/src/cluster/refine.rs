@@ -69,6 +69,8 @@ pub(crate) struct Refiner<'a> {
     pub seed: u64,
     /// Stop (and report [`Refiner::build`]'s `None`) past this many links.
     pub max_links: u64,
+    /// Set from outside to stop early ([`Refiner::build`] then returns `None` too).
+    pub stop: Option<&'a AtomicBool>,
 }
 
 /// The smallest mean cosine a cluster is credited with towards a source, against dividing by
@@ -121,6 +123,10 @@ impl Refiner<'_> {
             .map(|pairs| {
                 let mut out = Vec::new();
                 for &(r, s) in pairs {
+                    if self.stop.is_some_and(|f| f.load(Ordering::Relaxed)) {
+                        abort.store(true, Ordering::Relaxed);
+                        break;
+                    }
                     if !self.run(r, s, &mut out, &count, &abort) {
                         break;
                     }
