@@ -279,7 +279,8 @@ fn build_scene(
 /// What changed since the renderer last looked (Bevy change detection, no gathering).
 #[derive(Resource, Clone, Copy, Debug, PartialEq, Eq)]
 pub struct RenderChanges {
-    /// Geometry, materials, transforms or lights: the scene is gathered and uploaded again.
+    /// Geometry, materials, transforms, lights or the sky: the scene is gathered and uploaded
+    /// again (its textures stay cached).
     pub scene: bool,
     /// Only the camera moved: one uniform is written.
     pub camera: bool,
@@ -297,7 +298,11 @@ impl Default for RenderChanges {
 
 /// Notes what the renderer must upload: any drawn surface or light changed, appeared or went,
 /// or only the camera moved.
-#[expect(clippy::type_complexity, reason = "change-detection filters")]
+#[expect(
+    clippy::type_complexity,
+    clippy::too_many_arguments,
+    reason = "change-detection filters, one system parameter per kind of change"
+)]
 pub fn detect_render_changes(
     surfaces: Query<
         (),
@@ -331,12 +336,14 @@ pub fn detect_render_changes(
     mut removed_geometry: RemovedComponents<crate::scene::Geometry>,
     mut removed_static: RemovedComponents<crate::scene::Static>,
     mut removed_lights: RemovedComponents<crate::scene::PunctualLight>,
+    sky: Option<Res<crate::scene::SceneSky>>,
     mut changes: ResMut<RenderChanges>,
 ) {
     let removed = removed_geometry.read().count()
         + removed_static.read().count()
         + removed_lights.read().count();
-    if !surfaces.is_empty() || !lights.is_empty() || removed > 0 {
+    let sky_changed = sky.is_some_and(|s| s.is_changed());
+    if !surfaces.is_empty() || !lights.is_empty() || removed > 0 || sky_changed {
         changes.scene = true;
     }
     if !cameras.is_empty() {

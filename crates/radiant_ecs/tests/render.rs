@@ -164,6 +164,13 @@ fn extraction_uploads_only_what_changed() {
     assert_eq!(uploads(&app), 3);
     app.update();
     assert_eq!(uploads(&app), 3);
+    // A new sky is uploaded too.
+    app.world.resource_mut::<radiant_ecs::scene::SceneSky>().0 =
+        Some(radiant_scene::Sky::Uniform {
+            radiance: [0.0, 0.0, 4.0],
+        });
+    app.update();
+    assert_eq!(uploads(&app), 4);
     assert_eq!(app.world.resource::<RenderState>().error, None);
 }
 

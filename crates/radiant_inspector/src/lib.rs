@@ -1,5 +1,5 @@
-//! egui panels over Radiant's ECS world: colours, lights, post-processing, the bake and
-//! performance.
+//! egui panels over Radiant's ECS world: colours, lights, the sky, post-processing, the bake
+//! and performance.
 //!
 //! The inspector holds no copy of the scene. Every frame it reads the world, and it writes a
 //! component or resource back only when the user changed it, so Bevy's change detection does
@@ -38,6 +38,8 @@ pub enum Tab {
     Colour,
     /// Punctual lights.
     Lights,
+    /// The sky.
+    Sky,
     /// Tone mapping, debug view and effects.
     Post,
     /// The bake.
@@ -48,9 +50,10 @@ pub enum Tab {
 
 impl Tab {
     /// Every tab, in display order.
-    pub const ALL: [Tab; 5] = [
+    pub const ALL: [Tab; 6] = [
         Tab::Colour,
         Tab::Lights,
+        Tab::Sky,
         Tab::Post,
         Tab::Radiosity,
         Tab::Performance,
@@ -61,6 +64,7 @@ impl Tab {
         match self {
             Tab::Colour => "Colour",
             Tab::Lights => "Lights",
+            Tab::Sky => "Sky",
             Tab::Post => "Post",
             Tab::Radiosity => "Radiosity",
             Tab::Performance => "Performance",
@@ -82,6 +86,8 @@ pub struct InspectorState {
     pub hex_emission: String,
     /// Text of each light's hex field.
     pub hex_lights: HashMap<Entity, String>,
+    /// Text of the sky's hex fields (uniform or zenith, horizon).
+    pub hex_sky: [String; 2],
     /// Each light's colour temperature in the picker, kelvin.
     pub kelvin: HashMap<Entity, f64>,
     /// A chromaticity picked outside sRGB, and the colour it was mapped to.
@@ -131,6 +137,7 @@ pub fn tab_ui(ui: &mut egui::Ui, world: &mut World, state: &mut InspectorState) 
     match state.tab {
         Tab::Colour => panels::colour_panel(ui, world, state),
         Tab::Lights => panels::lights_panel(ui, world, state),
+        Tab::Sky => panels::sky_panel(ui, world, state),
         Tab::Post => panels::post_panel(ui, world, state),
         Tab::Radiosity => panels::radiosity_panel(ui, world, state),
         Tab::Performance => panels::performance_panel(ui, world, state),

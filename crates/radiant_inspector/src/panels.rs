@@ -7,7 +7,7 @@ use egui::{Color32, RichText, Ui};
 use egui_plot::{Line, Plot, PlotPoints};
 use radiant_ecs::bake::{BakeControl, BakePhase, BakeStatus, RadiosityBake};
 use radiant_ecs::render::{Bloom, DebugView, GaussianBlur, RenderState, Sobel, Ssao, Tonemapping};
-use radiant_ecs::scene::{Material, PunctualLight, SceneCamera, SurfaceOrder};
+use radiant_ecs::scene::{Material, PunctualLight, SceneCamera, SceneSky, SurfaceOrder};
 use radiant_scene::LightKind;
 
 use crate::InspectorState;
@@ -227,6 +227,71 @@ pub fn lights_panel(ui: &mut Ui, world: &mut World, state: &mut InspectorState) 
         {
             l.0 = light;
         }
+    }
+}
+
+/// Brightest sky radiance the editors offer (emissive units).
+const SKY_MAX: f64 = 1e4;
+
+/// The sky: none, uniform or a zenith/horizon gradient, edited as HDR colours; an image sky is
+/// shown, and can be replaced. An edit re-lights the bake (its links are kept) and the frame.
+pub fn sky_panel(ui: &mut Ui, world: &mut World, state: &mut InspectorState) {
+    use radiant_scene::Sky;
+    let Some(original) = world.get_resource::<SceneSky>().map(|s| s.0.clone()) else {
+        ui.label("This world has no sky resource.");
+        return;
+    };
+    let mut sky = original.clone();
+    // The kind, switching with the colours carried over.
+    let kind = |s: &Option<Sky>| match s {
+        None => 0,
+        Some(Sky::Uniform { .. }) => 1,
+        Some(Sky::Gradient { .. }) => 2,
+        Some(Sky::Image(_)) => 3,
+    };
+    let mut chosen = kind(&sky);
+    ui.horizontal(|ui| {
+        ui.radio_value(&mut chosen, 0, "none");
+        ui.radio_value(&mut chosen, 1, "uniform");
+        ui.radio_value(&mut chosen, 2, "gradient");
+        if matches!(sky, Some(Sky::Image(_))) {
+            ui.radio_value(&mut chosen, 3, "image");
+        }
+    });
+    if chosen != kind(&sky) {
+        let (zenith, horizon) = match &sky {
+            Some(Sky::Uniform { radiance }) => (*radiance, *radiance),
+            Some(Sky::Gradient { zenith, horizon }) => (*zenith, *horizon),
+            _ => ([0.4, 0.6, 1.0], [1.0; 3]),
+        };
+        sky = match chosen {
+            1 => Some(Sky::Uniform { radiance: zenith }),
+            2 => Some(Sky::Gradient { zenith, horizon }),
+            _ => None,
+        };
+        state.hex_sky = Default::default();
+    }
+    match &mut sky {
+        None => {
+            ui.label("No sky: only emitters and punctual lights light the scene.");
+        }
+        Some(Sky::Uniform { radiance }) => {
+            ui.label("radiance (every direction)");
+            colour::rgb_editor(ui, "hex_sky_0", radiance, SKY_MAX, &mut state.hex_sky[0]);
+        }
+        Some(Sky::Gradient { zenith, horizon }) => {
+            ui.label("zenith");
+            colour::rgb_editor(ui, "hex_sky_0", zenith, SKY_MAX, &mut state.hex_sky[0]);
+            ui.label("horizon (and below)");
+            colour::rgb_editor(ui, "hex_sky_1", horizon, SKY_MAX, &mut state.hex_sky[1]);
+        }
+        Some(Sky::Image(img)) => {
+            ui.label(format!("{} ({}×{})", img.path, img.width, img.height));
+        }
+    }
+    ui.small("The sky lights the bake with visibility and takes part in every bounce; an edit re-lights it.");
+    if sky != original {
+        world.resource_mut::<SceneSky>().0 = sky;
     }
 }
 

@@ -204,6 +204,65 @@ fn lights_panel_edits_colour_temperature_and_cones() {
 }
 
 #[test]
+fn sky_panel_switches_kinds_and_edits_the_sky_resource() {
+    use radiant_ecs::scene::SceneSky;
+    use radiant_scene::Sky;
+    let mut h = harness(Tab::Sky);
+    h.run();
+    assert_eq!(h.state().world.resource::<SceneSky>().0, None);
+    h.get_by_label("uniform").click();
+    h.run();
+    assert_eq!(
+        h.state().world.resource::<SceneSky>().0,
+        Some(Sky::Uniform {
+            radiance: [0.4, 0.6, 1.0]
+        })
+    );
+    // Uniform to gradient keeps the colour at both ends.
+    h.get_by_label("gradient").click();
+    h.run();
+    snapshot(&mut h, "sky_panel");
+    assert_eq!(
+        h.state().world.resource::<SceneSky>().0,
+        Some(Sky::Gradient {
+            zenith: [0.4, 0.6, 1.0],
+            horizon: [0.4, 0.6, 1.0]
+        })
+    );
+    // The horizon's sRGB hex field, typed as a user would.
+    let horizon_field = |h: &Harness<'_, State>| {
+        h.get_all_by_role_and_label(egui::accesskit::Role::TextInput, "sRGB")
+            .nth(1)
+            .expect("the horizon's hex field")
+            .rect()
+    };
+    let r = horizon_field(&h);
+    h.hover_at(r.center());
+    h.drag_at(r.center());
+    h.drop_at(r.center());
+    h.run();
+    h.key_combination_modifiers(egui::Modifiers::COMMAND, &[egui::Key::A]);
+    h.run();
+    h.get_all_by_role_and_label(egui::accesskit::Role::TextInput, "sRGB")
+        .nth(1)
+        .expect("the horizon's hex field")
+        .type_text("#ffffff");
+    h.run();
+    let Some(Sky::Gradient { zenith, horizon }) = h.state().world.resource::<SceneSky>().0.clone()
+    else {
+        panic!("still a gradient");
+    };
+    assert_eq!(zenith, [0.4, 0.6, 1.0]);
+    assert!(
+        horizon.iter().all(|&c| (c - 1.0).abs() < 1e-9),
+        "{horizon:?}"
+    );
+    h.get_by_label("none").click();
+    h.run();
+    assert_eq!(h.state().world.resource::<SceneSky>().0, None);
+}
+
+#[test]
 fn post_panel_slider_and_toggles_write_components() {
     let mut h = harness(Tab::Post);
     h.run();
@@ -339,6 +398,10 @@ fn looking_at_a_panel_writes_nothing() {
         assert!(
             !w.is_resource_changed::<RadiosityBake>(),
             "{tab:?} rewrote the bake settings"
+        );
+        assert!(
+            !w.is_resource_changed::<radiant_ecs::scene::SceneSky>(),
+            "{tab:?} rewrote the sky"
         );
         assert!(!w.resource::<BakeControl>().is_paused());
     }

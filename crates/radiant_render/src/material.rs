@@ -101,10 +101,19 @@ pub struct GpuMaterial {
     pub count: u32,
 }
 
+/// One uploaded texture.
+struct Cached {
+    /// Held so the address the cache keys on stays this buffer's.
+    _pixels: Arc<[u8]>,
+    view: wgpu::TextureView,
+    /// Used by the latest upload.
+    used: bool,
+}
+
 /// Uploaded textures, keyed by their pixel buffer; survives scene uploads.
 #[derive(Default)]
 pub struct TextureCache {
-    textures: HashMap<(usize, usize), (Arc<[u8]>, wgpu::TextureView, bool)>,
+    textures: HashMap<(usize, usize), Cached>,
     white: Option<wgpu::TextureView>,
     samplers: HashMap<(u8, u8, bool), wgpu::Sampler>,
     uploads: usize,
@@ -154,8 +163,8 @@ impl TextureCache {
     ) -> wgpu::TextureView {
         let key = (t.pixels.as_ptr() as usize, t.pixels.len());
         if let Some(entry) = self.textures.get_mut(&key) {
-            entry.2 = true;
-            return entry.1.clone();
+            entry.used = true;
+            return entry.view.clone();
         }
         let max = device.limits().max_texture_dimension_2d;
         let levels = mip_chain(t.width, t.height, &t.pixels);
@@ -178,8 +187,14 @@ impl TextureCache {
         );
         let view = tex.create_view(&Default::default());
         self.uploads += 1;
-        self.textures
-            .insert(key, (t.pixels.clone(), view.clone(), true));
+        self.textures.insert(
+            key,
+            Cached {
+                _pixels: t.pixels.clone(),
+                view: view.clone(),
+                used: true,
+            },
+        );
         view
     }
 
@@ -227,7 +242,7 @@ impl TextureCache {
         draws: &[DrawRange],
     ) -> Vec<GpuMaterial> {
         for e in self.textures.values_mut() {
-            e.2 = false;
+            e.used = false;
         }
         let mut out = Vec::with_capacity(draws.len());
         for d in draws {
@@ -257,7 +272,7 @@ impl TextureCache {
                 count: d.count,
             });
         }
-        self.textures.retain(|_, e| e.2);
+        self.textures.retain(|_, e| e.used);
         out
     }
 }

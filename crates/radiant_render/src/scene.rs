@@ -184,7 +184,7 @@ impl RenderScene {
         let asked = cell.clamp(4, 256);
         let cell = asked.min(fit).max(4);
         if cell < asked {
-            tracing::info!(
+            tracing::debug!(
                 "light-map cell {asked} → {cell} texels for {} triangles (at most {MAX_LIGHTMAP_TEXELS} texels)",
                 scene.triangles.len()
             );
