@@ -69,6 +69,9 @@ struct Args {
     /// Print the graph's texture memory with and without each effect.
     #[arg(long)]
     memory: bool,
+    /// With `--synthetic`: draw every triangle on its own (no instances), to compare.
+    #[arg(long)]
+    flatten: bool,
 }
 
 fn main() -> anyhow::Result<()> {
@@ -95,7 +98,11 @@ fn main() -> anyhow::Result<()> {
         None => radiant::scene::builtin("cornell-box")?,
     };
     let render_scene = if args.synthetic {
-        let mut rs = RenderScene::from_scene(&scene, args.lightmap_cell)?;
+        let mut rs = if args.flatten {
+            RenderScene::from_scene_flattened(&scene, args.lightmap_cell)?
+        } else {
+            RenderScene::from_scene(&scene, args.lightmap_cell)?
+        };
         rs.fill_synthetic_lightmap(0.02);
         rs
     } else if !scene.has_emitters() {
@@ -115,6 +122,12 @@ fn main() -> anyhow::Result<()> {
     let gpu = GpuContext::headless()?;
     println!("adapter: {} ({:?})", gpu.info.name, gpu.info.backend);
     let mut frame = FrameRenderer::new(&gpu, &render_scene)?;
+    let (vertices, draws) = frame.scene_size();
+    println!(
+        "scene: {} triangles, {vertices} vertices uploaded in {draws} draws ({} instances)",
+        render_scene.vertices.len() / 3,
+        render_scene.instances.len().saturating_sub(1)
+    );
     let mut settings = FrameSettings::default();
     settings.tonemapping.operator = operator;
     settings.tonemapping.exposure = args.exposure;

@@ -250,6 +250,12 @@ impl FrameRenderer {
         self.compiles
     }
 
+    /// Vertices in the uploaded scene's vertex buffer, and draws (instanced copies share
+    /// their prototype's vertices).
+    pub fn scene_size(&self) -> (u32, usize) {
+        (self.scene.vertex_count, self.scene.materials.len())
+    }
+
     /// How many material textures were uploaded so far (cached ones count once).
     pub fn material_texture_uploads(&self) -> usize {
         self.textures.uploads()

@@ -140,6 +140,7 @@ pub fn scene(vertices: Vec<Vertex>, eye: Vec3, at: Vec3, h: f32) -> RenderScene 
         textures: Vec::new(),
         materials: Vec::new(),
         draws: Vec::new(),
+        instances: Vec::new(),
         sky: None,
         lights: Vec::new(),
         camera: CameraView {

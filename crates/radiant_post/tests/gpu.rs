@@ -952,18 +952,7 @@ fn masked_quad_scene() -> RenderScene {
         },
         RenderMaterial::default(),
     ];
-    s.draws = vec![
-        DrawRange {
-            material: 0,
-            first: 0,
-            count: 6,
-        },
-        DrawRange {
-            material: 1,
-            first: 6,
-            count: 6,
-        },
-    ];
+    s.draws = vec![DrawRange::new(0, 0, 6), DrawRange::new(1, 6, 6)];
     s
 }
 
@@ -1059,11 +1048,7 @@ fn a_mipmapped_texture_far_away_shows_its_linear_mean() {
         texture: Some(0),
         ..RenderMaterial::default()
     }];
-    rs.draws = vec![DrawRange {
-        material: 0,
-        first: 0,
-        count: 6,
-    }];
+    rs.draws = vec![DrawRange::new(0, 0, 6)];
     let mut frame = FrameRenderer::new(&gpu, &rs).expect("renderer");
     let img = frame
         .capture(&gpu, 64, 64, &albedo_view())
@@ -1139,11 +1124,7 @@ fn a_double_sided_surface_shows_its_own_side_from_each() {
             cull_back: true,
             ..RenderMaterial::default()
         }];
-        rs.draws = vec![DrawRange {
-            material: 0,
-            first: 0,
-            count: 12,
-        }];
+        rs.draws = vec![DrawRange::new(0, 0, 12)];
         let mut frame = FrameRenderer::new(&gpu, &rs).expect("renderer");
         let img = frame
             .capture(&gpu, 32, 32, &albedo_view())
@@ -1263,4 +1244,137 @@ fn golden_textured_scene() {
         .capture(&gpu, 256, 256, &FrameSettings::default())
         .expect("capture");
     assert_golden("textured_256.png", &c.ldr);
+}
+
+/// A level's repeated prop: a 0.4 m box (12 triangles), copied three times under rotations,
+/// scales (one of them not uniform) and translations and once mirrored, on a floor.
+fn props_scene() -> radiant_scene::Scene {
+    use glam::{DAffine3, DQuat};
+    use radiant_scene::{Surface, Triangle};
+    let mut scene = radiant_scene::Scene::default();
+    let corner = |i: usize| {
+        DVec3::new(
+            if i & 1 != 0 { 0.4 } else { 0.0 },
+            if i & 2 != 0 { 0.4 } else { 0.0 },
+            if i & 4 != 0 { 0.4 } else { 0.0 },
+        )
+    };
+    // Faces as corner quads, counter-clockwise from outside.
+    let faces = [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ];
+    let placements = [
+        DAffine3::from_translation(DVec3::new(-1.0, 0.0, 0.0)),
+        DAffine3::from_scale_rotation_translation(
+            DVec3::splat(1.5),
+            DQuat::from_rotation_y(0.7),
+            DVec3::new(0.2, 0.0, -0.3),
+        ),
+        // Scaled along axes that are not the box's: a shear of its faces.
+        DAffine3::from_rotation_translation(
+            DQuat::from_rotation_y(-1.1) * DQuat::from_rotation_x(0.2),
+            DVec3::new(0.9, 0.3, 0.2),
+        ) * DAffine3::from_scale(DVec3::new(1.0, 1.8, 0.7))
+            * DAffine3::from_quat(DQuat::from_rotation_z(0.6)),
+        DAffine3::from_scale_rotation_translation(
+            DVec3::new(-1.0, 1.0, 1.0),
+            DQuat::IDENTITY,
+            DVec3::new(0.3, 0.0, 0.9),
+        ),
+    ];
+    for (k, m) in placements.iter().enumerate() {
+        scene.surfaces.push(Surface {
+            name: format!("prop{k}"),
+            reflectance: [0.6, 0.5, 0.4],
+            ..Surface::default()
+        });
+        for f in faces {
+            for tri in [[f[0], f[1], f[2]], [f[0], f[2], f[3]]] {
+                let v = tri.map(|i| m.transform_point3(corner(i)));
+                scene.triangles.push(Triangle::new(v, k as u32));
+            }
+        }
+    }
+    scene.surfaces.push(Surface {
+        name: "floor".into(),
+        reflectance: [0.5; 3],
+        ..Surface::default()
+    });
+    let f = [
+        DVec3::new(-3.0, 0.0, -3.0),
+        DVec3::new(-3.0, 0.0, 3.0),
+        DVec3::new(3.0, 0.0, 3.0),
+        DVec3::new(3.0, 0.0, -3.0),
+    ];
+    scene.triangles.push(Triangle::new([f[0], f[1], f[2]], 4));
+    scene.triangles.push(Triangle::new([f[0], f[2], f[3]], 4));
+    scene.camera = Some(radiant_scene::Camera {
+        position: DVec3::new(0.5, 2.0, 3.5),
+        forward: (DVec3::new(0.0, 0.2, 0.0) - DVec3::new(0.5, 2.0, 3.5)).normalize(),
+        up: DVec3::Y,
+        yfov: 0.8,
+    });
+    scene
+}
+
+#[test]
+fn repeated_props_draw_as_instances_and_look_as_if_flattened() {
+    let gpu = gpu();
+    let scene = props_scene();
+    let mut inst = RenderScene::from_scene(&scene, 8).expect("convert");
+    // A light map that differs per texel position: a wrong light-map offset would show.
+    inst.fill_lightmap(|t| {
+        let p = t.position.as_vec3();
+        [
+            0.5 + 0.5 * (3.0 * p.x).sin(),
+            0.5 + 0.5 * (2.0 * p.z).cos(),
+            0.2 + p.y,
+        ]
+    });
+    // Three copies share the first one's vertices; the mirrored one is drawn on its own.
+    let instanced: Vec<_> = inst.draws.iter().filter(|d| d.instance_count > 1).collect();
+    assert_eq!(instanced.len(), 1, "{:?}", inst.draws);
+    assert_eq!((instanced[0].count, instanced[0].instance_count), (36, 3));
+    let mut flat = RenderScene::from_scene_flattened(&scene, 8).expect("convert");
+    assert!(flat.draws.iter().all(|d| d.instance_count == 1));
+    flat.lightmap = inst.lightmap.clone();
+    assert_eq!(flat.vertices, inst.vertices);
+    let (w, h) = (96u32, 72u32);
+    for settings in [
+        FrameSettings::MINIMAL,
+        FrameSettings {
+            debug_view: DebugView::Normal,
+            ..FrameSettings::MINIMAL
+        },
+    ] {
+        let a = FrameRenderer::new(&gpu, &inst)
+            .expect("instanced")
+            .capture(&gpu, w, h, &settings)
+            .expect("capture")
+            .hdr;
+        let b = FrameRenderer::new(&gpu, &flat)
+            .expect("flattened")
+            .capture(&gpu, w, h, &settings)
+            .expect("capture")
+            .hdr;
+        // The same up to rounding: the GPU moves the copies in f32, the flattened scene holds
+        // them moved in f64; an edge pixel may go to the other side.
+        let differ = a
+            .texels
+            .iter()
+            .zip(&b.texels)
+            .filter(|(x, y)| (0..3).any(|c| (x[c] - y[c]).abs() > 2e-3))
+            .count();
+        assert!(
+            differ <= (w * h) as usize / 200,
+            "{:?}: {differ} of {} pixels differ",
+            settings.debug_view,
+            w * h
+        );
+    }
 }

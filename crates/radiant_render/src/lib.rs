@@ -15,6 +15,7 @@ pub mod capture;
 pub mod context;
 pub mod gbuffer;
 pub mod graph;
+pub mod instancing;
 pub mod lighting;
 pub mod material;
 pub mod scene;

@@ -63,7 +63,8 @@ impl Default for RenderMaterial {
     }
 }
 
-/// A run of `count` indices from `first`, drawn with one material.
+/// A run of `count` indices from `first`, drawn with one material, once per instance in
+/// `first_instance..first_instance + instance_count` (of `RenderScene::instances`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct DrawRange {
     /// Index into `RenderScene::materials`.
@@ -72,6 +73,23 @@ pub struct DrawRange {
     pub first: u32,
     /// Number of indices.
     pub count: u32,
+    /// First instance.
+    pub first_instance: u32,
+    /// Number of instances.
+    pub instance_count: u32,
+}
+
+impl DrawRange {
+    /// Indices `first..first + count` with `material`, drawn once (instance 0, the identity).
+    pub fn new(material: u32, first: u32, count: u32) -> DrawRange {
+        DrawRange {
+            material,
+            first,
+            count,
+            first_instance: 0,
+            instance_count: 1,
+        }
+    }
 }
 
 /// A material's constants as the G-buffer shader sees them.
@@ -87,7 +105,8 @@ pub(crate) struct MaterialUniform {
     pad: u32,
 }
 
-/// A material on the GPU: its texture, sampler, constants and index range.
+/// A draw on the GPU: its material's texture, sampler and constants, its vertex range (in the
+/// uploaded vertex buffer) and its instances.
 pub struct GpuMaterial {
     /// The base-colour texture (1 × 1 white without one).
     pub texture: wgpu::TextureView,
@@ -95,10 +114,12 @@ pub struct GpuMaterial {
     pub sampler: wgpu::Sampler,
     /// [`MaterialUniform`].
     pub uniform: wgpu::Buffer,
-    /// First index.
+    /// First vertex.
     pub first: u32,
-    /// Number of indices.
+    /// Number of vertices.
     pub count: u32,
+    /// Instances.
+    pub instances: std::ops::Range<u32>,
 }
 
 /// One uploaded texture.
@@ -270,6 +291,7 @@ impl TextureCache {
                 }),
                 first: d.first,
                 count: d.count,
+                instances: d.first_instance..d.first_instance + d.instance_count,
             });
         }
         self.textures.retain(|_, e| e.used);

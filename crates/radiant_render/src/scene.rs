@@ -10,6 +10,7 @@ use radiant_scene::Sky;
 use wgpu::util::DeviceExt;
 
 use crate::RenderError;
+pub use crate::instancing::InstanceData;
 use crate::material::{DrawRange, GpuMaterial, RenderMaterial, RenderTexture, TextureCache};
 
 /// One vertex of the static geometry.
@@ -155,8 +156,12 @@ pub struct RenderScene {
     pub textures: Vec<RenderTexture>,
     /// Materials.
     pub materials: Vec<RenderMaterial>,
-    /// One index range per material; empty: every index with the default material.
+    /// Index ranges, each with one material and a range of `instances`; empty: every index
+    /// with the default material, drawn once.
     pub draws: Vec<DrawRange>,
+    /// How draws place their vertices: entry 0 (or none at all) is the identity; an instanced
+    /// draw's vertices are its prototype's, moved and given its light-map block per copy.
+    pub instances: Vec<InstanceData>,
     /// What is seen where no geometry is (black without one).
     pub sky: Option<Sky>,
     /// Punctual lights.
@@ -172,22 +177,31 @@ impl RenderScene {
     /// alpha masks and one light-map chart each; the scene's lights, camera and sky; no light
     /// map yet.
     ///
-    /// Each triangle gets a `cell × cell` texel square in a grid atlas; its vertices map to three
-    /// corners, inset by one texel so bilinear filtering stays inside the chart. A scene whose
-    /// atlas would pass [`MAX_LIGHTMAP_TEXELS`] gets a smaller cell (not below 4).
+    /// Each triangle gets a `cell × cell` texel square in the atlas, a surface's squares one
+    /// block (blocks packed on shelves); its vertices map to three corners, inset by one texel
+    /// so bilinear filtering stays inside the chart. A scene whose atlas would pass
+    /// [`MAX_LIGHTMAP_TEXELS`] gets a smaller cell (not below 4). Surfaces that copy another
+    /// under an affine map ([`crate::instancing`]) are drawn as its instances.
     pub fn from_scene(scene: &radiant_scene::Scene, cell: u32) -> Result<Self, RenderError> {
+        Self::build(scene, cell, true)
+    }
+
+    /// [`RenderScene::from_scene`] without instances: every triangle drawn on its own (the
+    /// same frame from more vertices; for comparisons and benchmarks).
+    pub fn from_scene_flattened(
+        scene: &radiant_scene::Scene,
+        cell: u32,
+    ) -> Result<Self, RenderError> {
+        Self::build(scene, cell, false)
+    }
+
+    fn build(
+        scene: &radiant_scene::Scene,
+        cell: u32,
+        instancing: bool,
+    ) -> Result<Self, RenderError> {
         if scene.triangles.is_empty() {
             return Err(RenderError::EmptyScene);
-        }
-        let fit = ((MAX_LIGHTMAP_TEXELS as f64 / scene.triangles.len() as f64).sqrt() as u32)
-            .min(MAX_LIGHTMAP_SIDE / ((scene.triangles.len() as f64).sqrt().ceil() as u32).max(1));
-        let asked = cell.clamp(4, 256);
-        let cell = asked.min(fit).max(4);
-        if cell < asked {
-            tracing::debug!(
-                "light-map cell {asked} → {cell} texels for {} triangles (at most {MAX_LIGHTMAP_TEXELS} texels)",
-                scene.triangles.len()
-            );
         }
         let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
         for t in &scene.triangles {
@@ -211,11 +225,33 @@ impl RenderScene {
             return Err(RenderError::NonFinite("vertex data"));
         }
         let origin = (lo + hi) * 0.5;
+        let (materials, surface_material, factors) = materials(scene);
+        let mut of_surface: Vec<Vec<u32>> = vec![Vec::new(); scene.surfaces.len()];
+        let mut slot = Vec::with_capacity(scene.triangles.len());
+        for (i, t) in scene.triangles.iter().enumerate() {
+            let list = &mut of_surface[t.surface as usize];
+            slot.push(list.len() as u32);
+            list.push(i as u32);
+        }
+        // The atlas: one block of charts per surface, in cells; then the cell size that fits.
+        let counts: Vec<usize> = of_surface.iter().map(Vec::len).collect();
+        let (blocks, cols, rows) = crate::instancing::pack_blocks(&counts);
+        let cells = u64::from(cols) * u64::from(rows);
+        let fit = ((MAX_LIGHTMAP_TEXELS as f64 / cells as f64).sqrt() as u32)
+            .min(MAX_LIGHTMAP_SIDE / cols.max(rows));
+        let asked = cell.clamp(4, 256);
+        let cell = asked.min(fit).max(4);
+        if cell < asked {
+            tracing::debug!(
+                "light-map cell {asked} → {cell} texels for {} triangles (at most {MAX_LIGHTMAP_TEXELS} texels)",
+                scene.triangles.len()
+            );
+        }
         // Sizes in u64, checked before anything is allocated.
-        let n = scene.triangles.len() as u64;
-        let cols = ((n as f64).sqrt().ceil() as u64).max(1);
-        let rows = n.div_ceil(cols);
-        let (w64, h64) = (cols * u64::from(cell), rows * u64::from(cell));
+        let (w64, h64) = (
+            u64::from(cols) * u64::from(cell),
+            u64::from(rows) * u64::from(cell),
+        );
         if w64 > u64::from(MAX_LIGHTMAP_SIDE) || h64 > u64::from(MAX_LIGHTMAP_SIDE) {
             return Err(RenderError::InvalidSize {
                 width: w64.min(u64::from(u32::MAX)) as u32,
@@ -223,14 +259,14 @@ impl RenderScene {
                 max: MAX_LIGHTMAP_SIDE,
             });
         }
-        let (cols, w, h) = (cols as u32, w64 as u32, h64 as u32);
-        let (materials, surface_material, factors) = materials(scene);
+        let (w, h) = (w64 as u32, h64 as u32);
         let mut vertices = Vec::with_capacity(scene.triangles.len() * 3);
         for (i, t) in scene.triangles.iter().enumerate() {
             let s = &scene.surfaces[t.surface as usize];
             let face = t.cross().normalize_or_zero().as_vec3();
             let albedo = factors[t.surface as usize];
-            let (cx, cy) = ((i as u32 % cols) * cell, (i as u32 / cols) * cell);
+            let (b, k) = (blocks[t.surface as usize], slot[i]);
+            let (cx, cy) = ((b.x + k % b.width) * cell, (b.y + k / b.width) * cell);
             let inset = 1.0;
             let span = cell as f32 - 2.0 * inset - 1.0;
             let corner = |u: f32, v: f32| {
@@ -261,25 +297,78 @@ impl RenderScene {
                 });
             }
         }
-        // Indices grouped by material (vertices stay in triangle order, which the light-map
-        // fill relies on).
+        // Surfaces that copy another are drawn as its instances; the rest are grouped by
+        // material (vertices stay in triangle order, which the light-map fill relies on).
+        let copies = if instancing {
+            crate::instancing::find_instances(scene, &of_surface, &surface_material)
+        } else {
+            vec![None; of_surface.len()]
+        };
+        let mut copies_of: Vec<Vec<(u32, glam::DAffine3)>> = vec![Vec::new(); of_surface.len()];
+        for (s, c) in copies.iter().enumerate() {
+            if let Some((p, m)) = c {
+                copies_of[*p as usize].push((s as u32, *m));
+            }
+        }
+        let flat = |s: usize| copies[s].is_none() && copies_of[s].is_empty();
+        tracing::debug!(
+            copies = copies.iter().flatten().count(),
+            prototypes = copies_of.iter().filter(|c| !c.is_empty()).count(),
+            surfaces = copies.len(),
+            "render scene: surfaces drawn as instances"
+        );
         let mut by_material: Vec<Vec<u32>> = vec![Vec::new(); materials.len()];
         for (i, t) in scene.triangles.iter().enumerate() {
-            let m = surface_material[t.surface as usize] as usize;
-            let i = i as u32 * 3;
-            by_material[m].extend([i, i + 1, i + 2]);
+            if flat(t.surface as usize) {
+                let m = surface_material[t.surface as usize] as usize;
+                let i = i as u32 * 3;
+                by_material[m].extend([i, i + 1, i + 2]);
+            }
         }
         let mut indices = Vec::with_capacity(vertices.len());
         let mut draws = Vec::new();
         for (m, list) in by_material.into_iter().enumerate() {
             if !list.is_empty() {
-                draws.push(DrawRange {
-                    material: m as u32,
-                    first: indices.len() as u32,
-                    count: list.len() as u32,
-                });
+                draws.push(DrawRange::new(
+                    m as u32,
+                    indices.len() as u32,
+                    list.len() as u32,
+                ));
                 indices.extend(list);
             }
+        }
+        let mut instances = vec![InstanceData::IDENTITY];
+        for (p, list) in copies_of.iter().enumerate() {
+            if list.is_empty() {
+                continue;
+            }
+            let first = indices.len() as u32;
+            for &i in &of_surface[p] {
+                indices.extend([i * 3, i * 3 + 1, i * 3 + 2]);
+            }
+            let first_instance = instances.len() as u32;
+            instances.push(InstanceData::IDENTITY);
+            let bp = blocks[p];
+            for &(s, m) in list {
+                // Origin-relative: x − o ↦ A (x − o) + (A o + t − o).
+                let rel = glam::DAffine3::from_mat3_translation(
+                    m.matrix3,
+                    m.matrix3 * origin + m.translation - origin,
+                );
+                let bs = blocks[s as usize];
+                let offset = [
+                    ((f64::from(bs.x) - f64::from(bp.x)) * f64::from(cell) / f64::from(w)) as f32,
+                    ((f64::from(bs.y) - f64::from(bp.y)) * f64::from(cell) / f64::from(h)) as f32,
+                ];
+                instances.push(InstanceData::new(rel, offset));
+            }
+            draws.push(DrawRange {
+                material: surface_material[p],
+                first,
+                count: indices.len() as u32 - first,
+                first_instance,
+                instance_count: instances.len() as u32 - first_instance,
+            });
         }
         let textures = scene
             .images
@@ -339,6 +428,7 @@ impl RenderScene {
             textures,
             materials,
             draws,
+            instances,
             sky: scene.sky.clone(),
             lights,
             camera,
@@ -541,12 +631,13 @@ pub struct SkyUniform {
 
 /// The scene's GPU buffers and textures.
 pub struct GpuScene {
-    /// Vertex buffer.
+    /// Vertex buffer: the drawn vertices in draw order (each draw's indices resolved; copies
+    /// of an instanced surface are not in it, only its prototype).
     pub vertices: wgpu::Buffer,
-    /// Index buffer (u32).
-    pub indices: wgpu::Buffer,
-    /// Number of indices.
-    pub index_count: u32,
+    /// Number of vertices.
+    pub vertex_count: u32,
+    /// Per-instance buffer of [`InstanceData`] (entry 0 the identity).
+    pub instances: wgpu::Buffer,
     /// One per draw range: texture, sampler, constants and indices.
     pub materials: Vec<GpuMaterial>,
     /// [`SkyUniform`].
@@ -632,16 +723,13 @@ impl GpuScene {
                 vertices: scene.vertices.len(),
             });
         }
-        let whole = [DrawRange {
-            material: 0,
-            first: 0,
-            count: scene.indices.len() as u32,
-        }];
+        let whole = [DrawRange::new(0, 0, scene.indices.len() as u32)];
         let draws = if scene.draws.is_empty() {
             &whole[..]
         } else {
             &scene.draws[..]
         };
+        let instance_count = scene.instances.len().max(1) as u64;
         for d in draws {
             if u64::from(d.first) + u64::from(d.count) > scene.indices.len() as u64 {
                 return Err(RenderError::InvalidScene(format!(
@@ -651,6 +739,29 @@ impl GpuScene {
                     scene.indices.len()
                 )));
             }
+            if u64::from(d.first_instance) + u64::from(d.instance_count) > instance_count {
+                return Err(RenderError::InvalidScene(format!(
+                    "instances {}..{} are past the {instance_count} instances",
+                    d.first_instance,
+                    u64::from(d.first_instance) + u64::from(d.instance_count),
+                )));
+            }
+        }
+        let instance_data: &[InstanceData] = if scene.instances.is_empty() {
+            &[InstanceData::IDENTITY]
+        } else {
+            &scene.instances
+        };
+        let finite = |i: &InstanceData| {
+            i.model
+                .iter()
+                .chain(&i.normal)
+                .chain(std::iter::once(&i.lightmap_offset))
+                .flatten()
+                .all(|x| x.is_finite())
+        };
+        if !instance_data.iter().all(finite) {
+            return Err(RenderError::NonFinite("instance data"));
         }
         for t in &scene.textures {
             if t.pixels.len() as u64 != u64::from(t.width) * u64::from(t.height) * 4
@@ -666,17 +777,38 @@ impl GpuScene {
                 )));
             }
         }
-        let materials = cache.upload(dev, &gpu.queue, &scene.textures, &scene.materials, draws);
+        // Each draw's vertices in draw order: draws become plain vertex ranges.
+        let mut drawn: Vec<Vertex> = Vec::new();
+        let mut resolved = Vec::with_capacity(draws.len());
+        for d in draws {
+            let first = drawn.len() as u32;
+            drawn.extend(
+                scene.indices[d.first as usize..(d.first + d.count) as usize]
+                    .iter()
+                    .map(|&i| scene.vertices[i as usize]),
+            );
+            resolved.push(DrawRange { first, ..*d });
+        }
+        let materials = cache.upload(
+            dev,
+            &gpu.queue,
+            &scene.textures,
+            &scene.materials,
+            &resolved,
+        );
         let (sky, sky_image) = upload_sky(gpu, scene.sky.as_ref())?;
+        if drawn.is_empty() {
+            return Err(RenderError::EmptyScene);
+        }
         let vertices = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("scene_vertices"),
-            contents: bytemuck::cast_slice(&scene.vertices),
+            contents: bytemuck::cast_slice(&drawn),
             usage: wgpu::BufferUsages::VERTEX,
         });
-        let indices = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("scene_indices"),
-            contents: bytemuck::cast_slice(&scene.indices),
-            usage: wgpu::BufferUsages::INDEX,
+        let instances = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("scene_instances"),
+            contents: bytemuck::cast_slice(instance_data),
+            usage: wgpu::BufferUsages::VERTEX,
         });
         let mut lights: Vec<GpuLight> = Vec::with_capacity(scene.lights.len().max(1));
         for l in &scene.lights {
@@ -788,9 +920,9 @@ impl GpuScene {
             mapped_at_creation: false,
         });
         Ok(Self {
+            vertex_count: drawn.len() as u32,
             vertices,
-            indices,
-            index_count: scene.indices.len() as u32,
+            instances,
             materials,
             sky,
             sky_image,
@@ -979,16 +1111,30 @@ mod tests {
         assert_eq!(rs.vertices[4].uv, [2.0, 0.0]);
         assert_eq!(rs.vertices[5].normal, [0.6, 0.0, 0.8]);
         assert_eq!(rs.vertices[4].normal, [0.0, 0.0, 1.0]);
-        // Every triangle drawn exactly once, grouped by material.
-        let mut seen: Vec<u32> = rs.indices.clone();
-        seen.sort_unstable();
-        assert_eq!(seen, (0..12).collect::<Vec<_>>());
-        assert_eq!(rs.draws.len(), 2);
-        assert_eq!(rs.draws.iter().map(|d| d.count).sum::<u32>(), 12);
-        for d in &rs.draws {
-            for &i in &rs.indices[d.first as usize..(d.first + d.count) as usize] {
-                let surface = scene.triangles[i as usize / 3].surface;
-                assert_eq!(d.material, u32::from(surface == 1));
+        // The second wall is the first moved by 2 along z: drawn as its instance, with its own
+        // light-map block. The rest is drawn flattened, grouped by material.
+        assert_eq!(rs.draws.len(), 2, "{:?}", rs.draws);
+        let (flat, inst) = (rs.draws[0], rs.draws[1]);
+        assert_eq!((flat.material, flat.instance_count), (1, 1));
+        let flat_tris: Vec<u32> = rs.indices
+            [flat.first as usize..(flat.first + flat.count) as usize]
+            .iter()
+            .map(|&i| i / 3)
+            .collect();
+        assert_eq!(flat_tris, vec![1, 1, 1, 3, 3, 3]);
+        assert_eq!((inst.material, inst.count, inst.instance_count), (0, 3, 2));
+        assert_eq!(rs.indices[inst.first as usize], 0);
+        let copy = rs.instances[(inst.first_instance + 1) as usize];
+        assert_eq!(copy.model[2][3], 2.0, "{copy:?}");
+        for k in 0..3 {
+            let (p, c) = (rs.vertices[k], rs.vertices[6 + k]);
+            for a in 0..2 {
+                let moved = p.lightmap_uv[a] + copy.lightmap_offset[a];
+                assert!(
+                    (moved - c.lightmap_uv[a]).abs() < 1e-6,
+                    "{moved} vs {:?}",
+                    c.lightmap_uv
+                );
             }
         }
     }
@@ -1002,7 +1148,14 @@ mod tests {
         let rs = RenderScene::from_scene(&scene, 32).expect("convert");
         let lm = rs.lightmap.as_ref().expect("light map");
         assert!(u64::from(lm.width) * u64::from(lm.height) <= MAX_LIGHTMAP_TEXELS);
-        assert_eq!((lm.width, lm.height), (512 * 5, 512 * 5));
+        // 5-texel cells (a 32-texel cell would need about 16 800² texels).
+        assert_eq!((lm.width % 5, lm.height % 5), (0, 0));
+        assert!(lm.width / 5 * (lm.height / 5) >= 1 << 18);
+        assert!(
+            rs.vertices
+                .iter()
+                .all(|v| { v.lightmap_uv.iter().all(|&c| (0.0..=1.0).contains(&c)) })
+        );
     }
 
     #[test]

@@ -30,6 +30,17 @@ struct VertexIn {
     @location(5) uv: vec2<f32>,
 };
 
+// Per instance: rows of the model matrix, rows of the normal matrix, the light-map offset.
+struct InstanceIn {
+    @location(6) m0: vec4<f32>,
+    @location(7) m1: vec4<f32>,
+    @location(8) m2: vec4<f32>,
+    @location(9) n0: vec4<f32>,
+    @location(10) n1: vec4<f32>,
+    @location(11) n2: vec4<f32>,
+    @location(12) lightmap_offset: vec4<f32>,
+};
+
 struct VertexOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) normal: vec3<f32>,
@@ -40,13 +51,15 @@ struct VertexOut {
 };
 
 @vertex
-fn gbuffer_vs(v: VertexIn) -> VertexOut {
+fn gbuffer_vs(v: VertexIn, inst: InstanceIn) -> VertexOut {
     var out: VertexOut;
-    out.clip = camera.view_proj * vec4<f32>(v.position, 1.0);
-    out.normal = v.normal;
+    let p = vec4<f32>(v.position, 1.0);
+    let world = vec3<f32>(dot(inst.m0, p), dot(inst.m1, p), dot(inst.m2, p));
+    out.clip = camera.view_proj * vec4<f32>(world, 1.0);
+    out.normal = vec3<f32>(dot(inst.n0.xyz, v.normal), dot(inst.n1.xyz, v.normal), dot(inst.n2.xyz, v.normal));
     out.albedo = v.albedo;
     out.emissive = v.emissive;
-    out.lightmap_uv = v.lightmap_uv;
+    out.lightmap_uv = v.lightmap_uv + inst.lightmap_offset.xy;
     out.uv = v.uv;
     return out;
 }

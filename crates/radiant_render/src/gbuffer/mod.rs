@@ -3,7 +3,7 @@
 use std::sync::Arc;
 
 use crate::graph::{RenderGraph, TextureDesc, TextureHandle};
-use crate::scene::{GpuScene, Vertex};
+use crate::scene::{GpuScene, InstanceData, Vertex};
 
 /// Albedo, Rgba8Unorm (linear reflectance).
 pub const ALBEDO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
@@ -87,6 +87,10 @@ impl GBufferPipeline {
             0 => Float32x3, 1 => Float32x3, 2 => Float32x3, 3 => Float32x3, 4 => Float32x2,
             5 => Float32x2
         ];
+        let instance_attributes = wgpu::vertex_attr_array![
+            6 => Float32x4, 7 => Float32x4, 8 => Float32x4,
+            9 => Float32x4, 10 => Float32x4, 11 => Float32x4, 12 => Float32x4
+        ];
         let target = |format| {
             Some(wgpu::ColorTargetState {
                 format,
@@ -101,11 +105,18 @@ impl GBufferPipeline {
                 module: &module,
                 entry_point: Some("gbuffer_vs"),
                 compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: std::mem::size_of::<Vertex>() as u64,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &attributes,
-                })],
+                buffers: &[
+                    Some(wgpu::VertexBufferLayout {
+                        array_stride: std::mem::size_of::<Vertex>() as u64,
+                        step_mode: wgpu::VertexStepMode::Vertex,
+                        attributes: &attributes,
+                    }),
+                    Some(wgpu::VertexBufferLayout {
+                        array_stride: std::mem::size_of::<InstanceData>() as u64,
+                        step_mode: wgpu::VertexStepMode::Instance,
+                        attributes: &instance_attributes,
+                    }),
+                ],
             },
             primitive: wgpu::PrimitiveState {
                 cull_mode: None,
@@ -264,10 +275,10 @@ pub fn gbuffer_pass(
         pass.set_pipeline(&pipeline.pipeline);
         pass.set_bind_group(0, &bind, &[]);
         pass.set_vertex_buffer(0, scene.vertices.slice(..));
-        pass.set_index_buffer(scene.indices.slice(..), wgpu::IndexFormat::Uint32);
+        pass.set_vertex_buffer(1, scene.instances.slice(..));
         for (m, bind) in scene.materials.iter().zip(&materials) {
             pass.set_bind_group(1, bind, &[]);
-            pass.draw_indexed(m.first..m.first + m.count, 0, 0..1);
+            pass.draw(m.first..m.first + m.count, m.instances.clone());
         }
     });
     g
