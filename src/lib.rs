@@ -55,19 +55,19 @@ pub mod bridge {
     }
 
     /// Fills `render_scene`'s light map (made by `RenderScene::from_scene(scene, ..)`) with the
-    /// bake's incident radiance `H = (B − E) / ρ` of the element under each texel, so the
-    /// renderer's `albedo × H + E` reproduces the baked radiosity `B`.
+    /// bake's incident radiance `H` at each texel's point, from the bake's smooth field
+    /// (`radiosity::smooth`), so the renderer's `albedo × H + E` reproduces it.
     pub fn fill_lightmap_from_bake(
         render_scene: &mut RenderScene,
         scene: &Scene,
         bake: &BakeResult,
     ) {
-        radiant_ecs::render::fill_lightmap(
-            render_scene,
-            scene,
+        let field = radiant_radiosity::smooth::SmoothField::new(
             &bake.mesh,
+            &bake.system,
+            &scene.surfaces,
             &bake.radiosity,
-            &bake.system.rho,
         );
+        radiant_ecs::render::fill_lightmap(render_scene, scene, &bake.mesh, &field);
     }
 }

@@ -58,3 +58,129 @@ fn a_lamp_over_a_floor_is_drawn_once() {
         "radiance under the lamp {got}, bake says {want}"
     );
 }
+
+/// The light map's `H` at `uv`, bilinear as the renderer samples it (clamped at the edges).
+fn sample(lm: &radiant::render::scene::LightMap, uv: [f32; 2]) -> [f64; 3] {
+    let (w, h) = (lm.width as f32, lm.height as f32);
+    let (x, y) = (uv[0] * w - 0.5, uv[1] * h - 0.5);
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (f64::from(x - x0), f64::from(y - y0));
+    let at = |i: f32, j: f32| {
+        let (i, j) = (
+            (i as i64).clamp(0, lm.width as i64 - 1),
+            (j as i64).clamp(0, lm.height as i64 - 1),
+        );
+        lm.texels[(j * i64::from(lm.width) + i) as usize].map(f64::from)
+    };
+    let (a, b, c, d) = (
+        at(x0, y0),
+        at(x0 + 1.0, y0),
+        at(x0, y0 + 1.0),
+        at(x0 + 1.0, y0 + 1.0),
+    );
+    std::array::from_fn(|k| {
+        (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy
+    })
+}
+
+#[test]
+fn cornell_light_map_texels_match_mitsuba_and_agree_across_shared_edges() {
+    use radiant::radiosity::metrics::{CORNELL_POINTS_RGB, parse_point_csv};
+    let scene = radiant::scene::builtin("cornell-box").expect("builtin");
+    let bake = Bake::new(&scene, &BakeParams::default())
+        .expect("bake")
+        .run_to_end(&mut |_| {})
+        .expect("solve");
+    let rs = radiant::bridge::render_scene(&scene, Some(&bake), 32).expect("render scene");
+    let lm = rs.lightmap.as_ref().expect("a light map");
+    let vert = |t: usize, k: usize| &rs.vertices[t * 3 + k];
+    let pos = |t: usize, k: usize| rs.origin + glam::Vec3::from(vert(t, k).position).as_dvec3();
+    // At the 24 path-traced points: the texel value as the renderer reads it (albedo × H + E).
+    let refs = parse_point_csv(CORNELL_POINTS_RGB, 1e-3).expect("points");
+    let (mut mean, mut max) = (0.0f64, 0.0f64);
+    for p in &refs {
+        let (t, w) = (0..scene.triangles.len())
+            .find_map(|t| {
+                let tri = &scene.triangles[t];
+                let n = tri.cross().normalize();
+                if n.dot(p.normal) < 0.99 || (p.position - tri.vertices[0]).dot(n).abs() > 5e-3 {
+                    return None;
+                }
+                let w = radiant::scene::texture::barycentric(tri.vertices, p.position);
+                w.iter().all(|&x| x >= -1e-9).then_some((t, w))
+            })
+            .unwrap_or_else(|| panic!("{} is on no triangle", p.name));
+        let uv: [f32; 2] = std::array::from_fn(|a| {
+            (0..3)
+                .map(|k| w[k] as f32 * vert(t, k).lightmap_uv[a])
+                .sum()
+        });
+        let hh = sample(lm, uv);
+        let v = vert(t, 0);
+        let ours: [f64; 3] = std::array::from_fn(|c| {
+            let albedo = (f64::from(v.albedo[c]) * 255.0).round() / 255.0;
+            f64::from(v.emissive[c]) + albedo * hh[c]
+        });
+        let sum: f64 = p.radiosity.iter().sum();
+        let rel = (0..3)
+            .map(|c| (ours[c] - p.radiosity[c]).abs())
+            .sum::<f64>()
+            / sum;
+        mean += rel / refs.len() as f64;
+        max = max.max(rel);
+    }
+    eprintln!(
+        "light-map texels at the 24 points: mean {:.2} %, max {:.2} %",
+        mean * 100.0,
+        max * 100.0
+    );
+    assert!(
+        mean <= 0.02 && max <= 0.05,
+        "mean {:.2} %, max {:.2} %",
+        mean * 100.0,
+        max * 100.0
+    );
+    // Seams: two triangles of one surface that share an edge read the same light along it.
+    let (mut worst, mut edges) = (0.0f64, 0);
+    let n = scene.triangles.len();
+    for a in 0..n {
+        for b in a + 1..n {
+            if scene.triangles[a].surface != scene.triangles[b].surface {
+                continue;
+            }
+            let shared: Vec<(usize, usize)> = (0..3)
+                .flat_map(|i| (0..3).map(move |j| (i, j)))
+                .filter(|&(i, j)| (pos(a, i) - pos(b, j)).length() < 1e-6)
+                .collect();
+            if shared.len() != 2 {
+                continue;
+            }
+            edges += 1;
+            for t in [0.1f32, 0.3, 0.5, 0.7, 0.9] {
+                let on = |tri: usize, k0: usize, k1: usize| -> [f32; 2] {
+                    let (u0, u1) = (vert(tri, k0).lightmap_uv, vert(tri, k1).lightmap_uv);
+                    [u0[0] + (u1[0] - u0[0]) * t, u0[1] + (u1[1] - u0[1]) * t]
+                };
+                let ha = sample(lm, on(a, shared[0].0, shared[1].0));
+                let hb = sample(lm, on(b, shared[0].1, shared[1].1));
+                let scale = ha
+                    .iter()
+                    .chain(&hb)
+                    .fold(0.0f64, |m, x| m.max(x.abs()))
+                    .max(1e-3);
+                let d = (0..3).map(|c| (ha[c] - hb[c]).abs()).fold(0.0, f64::max) / scale;
+                worst = worst.max(d);
+            }
+        }
+    }
+    eprintln!(
+        "{edges} shared edges, worst difference across them {:.2} %",
+        worst * 100.0
+    );
+    assert!(edges >= 10, "{edges} shared edges");
+    assert!(
+        worst <= 0.01,
+        "texels differ by {:.2} % across a shared edge",
+        worst * 100.0
+    );
+}

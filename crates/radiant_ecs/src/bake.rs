@@ -23,6 +23,7 @@ use bevy_ecs::prelude::*;
 use bevy_tasks::{AsyncComputeTaskPool, Task, TaskPoolBuilder, futures::check_ready};
 use radiant_radiosity::bake::STALL_STEPS;
 use radiant_radiosity::metrics::{SurfaceMean, surface_means};
+use radiant_radiosity::smooth::{SmoothField, element_emission};
 use radiant_radiosity::{Bake, BakeParams, Mesh, Rgb};
 use radiant_scene::{Light, Scene, Sky, Surface};
 
@@ -131,8 +132,9 @@ pub struct BakedLighting {
     pub mesh: Option<Arc<Mesh>>,
     /// Radiosity per element (emissive units).
     pub radiosity: Arc<Vec<Rgb>>,
-    /// Reflectance per element (textured surfaces: the texture's mean over the element).
-    pub reflectance: Arc<Vec<Rgb>>,
+    /// The light as a smooth field over the elements (`radiant_radiosity::smooth`), for light
+    /// maps: incident radiance averaged at element vertices, each element's reflectance.
+    pub field: Option<Arc<SmoothField>>,
     /// Area-weighted mean radiosity per static surface, in gather order.
     pub surfaces: Vec<SurfaceMean>,
     /// The estimated error when it was published.
@@ -272,7 +274,7 @@ enum Report {
     },
     Publish {
         radiosity: Vec<Rgb>,
-        reflectance: Vec<Rgb>,
+        field: Arc<SmoothField>,
         surfaces: Vec<SurfaceMean>,
         epoch: u64,
         converged: bool,
@@ -513,9 +515,10 @@ fn work(
         if done || last_publish.is_none_or(|t| t.elapsed() >= publish_interval) {
             let radiosity = bake.radiosity();
             let surfaces = surface_means(&bake.surfaces, &bake.mesh, &radiosity);
+            let field = SmoothField::new(&bake.mesh, &bake.system, &bake.surfaces, &radiosity);
             send(Report::Publish {
+                field: Arc::new(field),
                 radiosity,
-                reflectance: bake.system.rho.clone(),
                 surfaces,
                 epoch,
                 converged: done,
@@ -587,6 +590,7 @@ fn work_clustered(
     let t0 = Instant::now();
     let mut sent_built = false;
     let mut last_publish: Option<Instant> = None;
+    let mut emission: Option<Vec<Rgb>> = None;
     let mut on_sweep = |s: &Sweep<'_>| {
         if !sent_built {
             let _ = tx.send(built(s.mesh, s.links));
@@ -599,9 +603,23 @@ fn work_clustered(
             residual: s.residual,
         });
         if last_publish.is_none_or(|t| t.elapsed() >= setup.publish_interval) {
+            let emission =
+                emission.get_or_insert_with(|| element_emission(s.mesh, &scene.surfaces));
+            let weight: Vec<f64> = s
+                .enclosed
+                .iter()
+                .map(|&d| f64::from(u8::from(!d)))
+                .collect();
+            let field = SmoothField::from_parts(
+                s.mesh,
+                s.reflectance,
+                emission,
+                Some(&weight),
+                s.radiosity,
+            );
             let _ = tx.send(Report::Publish {
                 radiosity: s.radiosity.to_vec(),
-                reflectance: s.reflectance.to_vec(),
+                field: Arc::new(field),
                 surfaces: surface_means(&scene.surfaces, s.mesh, s.radiosity),
                 epoch: setup.epoch,
                 converged: false,
@@ -629,8 +647,9 @@ fn work_clustered(
             if let Some(w) = r.report.warnings.last() {
                 let _ = tx.send(Report::Warning(w.clone()));
             }
+            let field = SmoothField::new(&r.mesh, &r.system, &scene.surfaces, &r.radiosity);
             let _ = tx.send(Report::Publish {
-                reflectance: r.system.rho.clone(),
+                field: Arc::new(field),
                 radiosity: r.radiosity,
                 surfaces: r.surfaces,
                 epoch: setup.epoch,
@@ -790,7 +809,7 @@ fn drain(world: &mut World) {
             }
             Report::Publish {
                 radiosity,
-                reflectance,
+                field,
                 surfaces,
                 epoch,
                 converged,
@@ -804,7 +823,7 @@ fn drain(world: &mut World) {
                 l.generation += 1;
                 l.mesh = mesh;
                 l.radiosity = Arc::new(radiosity);
-                l.reflectance = Arc::new(reflectance);
+                l.field = Some(field);
                 l.surfaces = surfaces;
                 l.estimated_error = err;
                 let mut s = world.resource_mut::<BakeStatus>();

@@ -11,6 +11,7 @@ use std::sync::Arc;
 
 use bevy_ecs::prelude::*;
 use radiant_post::frame::{FrameRenderer, FrameSettings};
+use radiant_radiosity::smooth::SmoothField;
 use radiant_radiosity::{Mesh, Rgb};
 use radiant_render::capture::Image;
 use radiant_render::scene::{CameraView, RenderScene};
@@ -146,24 +147,17 @@ impl Plugin for RenderPlugin {
     }
 }
 
-/// Fills a light map made by `RenderScene::from_scene(scene, ..)` with the incident radiance
-/// `H = (B − E)/ρ̃` of the element under each texel, so that the renderer's `albedo × H + E`
-/// reproduces the baked `B`; `ρ̃` is the albedo as the 8-bit G-buffer stores it. On a textured
-/// surface `ρ̃` is the element's own reflectance (`reflectance`, per element, the texture's
-/// mean over its footprint: the renderer multiplies by the texel instead); where
-/// `reflectance` does not match the mesh, the surface's. Dynamic surfaces (not in the bake)
-/// get `H = 0`.
+/// Fills a light map made by `RenderScene::from_scene(scene, ..)` with the bake's incident
+/// radiance `H` at each texel's point, from the smooth field (`radiant_radiosity::smooth`:
+/// `H` averaged at element vertices and interpolated), so the renderer's `albedo × H + E`
+/// reproduces the smooth radiosity `E + ρ H`. On an untextured surface `H` is scaled by
+/// `ρ / ρ̃`, `ρ̃` the albedo as the 8-bit G-buffer stores it, so the frame gives the baked value
+/// exactly; a textured one multiplies by its texel instead of the element's footprint mean.
+/// Dynamic surfaces (not in the bake) get `H = 0`.
 ///
 /// The bake's radiosity already holds the punctual lights' direct light, with shadows, so a
 /// frame drawn from this light map must not add the lights again: [`lit_by_bake`] removes them.
-pub fn fill_lightmap(
-    rs: &mut RenderScene,
-    scene: &Scene,
-    mesh: &Mesh,
-    radiosity: &[Rgb],
-    reflectance: &[Rgb],
-) {
-    let per_element = reflectance.len() == radiosity.len();
+pub fn fill_lightmap(rs: &mut RenderScene, scene: &Scene, mesh: &Mesh, field: &SmoothField) {
     // Scene triangle → bake input triangle (the bake meshes the static part only).
     let mut next = 0u32;
     let to_root: Vec<Option<u32>> = scene
@@ -190,22 +184,18 @@ pub fn fill_lightmap(
             return [0.0; 3];
         }
         let surface = &scene.surfaces[tri.surface as usize];
-        let e = mesh.locate(*root, f64::from(t.u), f64::from(t.v));
-        let Some(b) = radiosity.get(e as usize) else {
-            return [0.0; 3];
-        };
-        let textured = surface.base_color_texture.is_some() && per_element;
+        let (leaf, w) = mesh.locate_weights(*root, f64::from(t.u), f64::from(t.v));
+        let h = field.irradiance_in(leaf, w);
+        let rho = field.reflectance(leaf);
+        let textured = surface.base_color_texture.is_some();
         [0, 1, 2].map(|c| {
-            let stored = if textured {
-                reflectance[e as usize][c]
+            let scale = if textured {
+                1.0
             } else {
-                (surface.reflectance[c] * 255.0).round() / 255.0
+                let stored = (surface.reflectance[c] * 255.0).round() / 255.0;
+                if stored > 0.0 { rho[c] / stored } else { 0.0 }
             };
-            if stored > 0.0 {
-                ((b[c] - surface.emission[c]) / stored).clamp(0.0, 65504.0) as f32
-            } else {
-                0.0
-            }
+            (h[c] * scale).clamp(0.0, 65504.0) as f32
         })
     });
 }
@@ -266,10 +256,10 @@ fn build_scene(
     }
     let lit = world.resource::<BakedLighting>().clone();
     let mut rs = RenderScene::from_scene(&scene, settings.lightmap_cell)?;
-    if let Some(mesh) = &lit.mesh
+    if let (Some(mesh), Some(field)) = (&lit.mesh, &lit.field)
         && !lit.radiosity.is_empty()
     {
-        fill_lightmap(&mut rs, &scene, mesh, &lit.radiosity, &lit.reflectance);
+        fill_lightmap(&mut rs, &scene, mesh, field);
         lit_by_bake(&mut rs);
     }
     world.resource_mut::<RenderState>().scene = Some(Arc::new(scene));

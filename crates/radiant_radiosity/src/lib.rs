@@ -32,6 +32,7 @@ pub mod mesh;
 pub mod metrics;
 pub mod rng;
 pub mod scenes;
+pub mod smooth;
 pub mod solvers;
 pub mod spectral;
 pub mod system;

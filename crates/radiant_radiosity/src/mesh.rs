@@ -364,14 +364,20 @@ impl Mesh {
     /// The element of input triangle `root` that contains the point with barycentric weights
     /// `(1 - u - v, u, v)` on the input triangle.
     pub fn locate(&self, root: u32, u: f64, v: f64) -> u32 {
+        self.locate_weights(root, u, v).0
+    }
+
+    /// [`Mesh::locate`], with the point's barycentric weights of the element's own vertices.
+    pub fn locate_weights(&self, root: u32, u: f64, v: f64) -> (u32, [f64; 3]) {
         let mut id = self.roots[root as usize];
         let (mut b0, mut b1, mut b2) = (1.0 - u - v, u, v);
         loop {
             let n = &self.nodes[id as usize];
             if n.is_leaf() {
-                return n.leaf_lo;
+                return (n.leaf_lo, [b0, b1, b2]);
             }
-            // Children: 0 at vertex 0, 1 at vertex 1, 2 at vertex 2, 3 in the middle.
+            // Children: 0 at vertex 0, 1 at vertex 1, 2 at vertex 2, 3 in the middle (its
+            // vertices the midpoints of the opposite edges).
             let k = if b0 >= 0.5 {
                 (b0, b1, b2) = (2.0 * b0 - 1.0, 2.0 * b1, 2.0 * b2);
                 0

@@ -163,6 +163,8 @@ pub struct Sweep<'a> {
     pub radiosity: &'a [Rgb],
     /// Reflectance per element.
     pub reflectance: &'a [Rgb],
+    /// Per element: inside closed geometry (seen by nothing).
+    pub enclosed: &'a [bool],
     /// Sweeps so far.
     pub iterations: u64,
     /// The estimated relative error of `radiosity` (the bake's residual).
@@ -362,6 +364,7 @@ pub fn bake_watched(
                 mesh: &mesh,
                 radiosity: &b,
                 reflectance: &sys.rho,
+                enclosed: sys.enclosed(),
                 iterations,
                 residual,
                 links: sys.links(),

@@ -171,6 +171,11 @@ impl HierSystem {
             .map(|c| self.cluster_children[c])
     }
 
+    /// Per element: inside closed geometry.
+    pub fn enclosed(&self) -> &[bool] {
+        &self.dead
+    }
+
     /// Number of links.
     pub fn links(&self) -> usize {
         self.src.len()
