@@ -255,7 +255,24 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         &out.join("patches.csv"),
         output::patches_csv(&scene, &result).as_bytes(),
     )?;
-    let map = lightmap::bake_lightmap(&result.mesh, &result.radiosity, args.lightmap_width);
+    // The renderer's atlas, filled from the smooth field.
+    let lap = Instant::now();
+    let atlas = radiant::scene::atlas::Atlas::new(&scene, args.lightmap_cell).map_err(|e| {
+        anyhow::anyhow!(
+            "the light map would be {}×{} texels even at 4 per chart (at most {} a side): the scene has too many triangles for it",
+            e.width,
+            e.height,
+            radiant::scene::atlas::MAX_SIDE
+        )
+    })?;
+    let field = radiant::radiosity::smooth::SmoothField::new(
+        &result.mesh,
+        &result.system,
+        &scene.surfaces,
+        &result.radiosity,
+    );
+    let map = lightmap::bake_lightmap(&scene, &atlas, &result.mesh, &field);
+    let lightmap_s = lap.elapsed().as_secs_f64();
     output::write_lightmaps(out, &map)?;
     let total_s = start.elapsed().as_secs_f64();
     let extra = json!({
@@ -266,7 +283,13 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         "tolerance": params.solver_params.tolerance,
         "seed": params.ff.seed,
         "threads": rayon::current_num_threads(),
-        "lightmap": { "width": map.width, "height": map.height },
+        "lightmap": {
+            "width": map.width,
+            "height": map.height,
+            "cell": atlas.cell,
+            "utilisation": atlas.utilisation(),
+            "seconds": lightmap_s,
+        },
     });
     let mut report = output::report_json(
         &source,
@@ -329,7 +352,7 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         );
     }
     println!(
-        "wrote {}/{{surfaces.csv, patches.csv, report.json, lightmap.hdr, lightmap.png}}",
+        "wrote {}/{{surfaces.csv, patches.csv, report.json, lightmap.exr, lightmap.png}}",
         out.display()
     );
     Ok(())

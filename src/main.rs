@@ -137,9 +137,10 @@ pub(crate) struct BakeArgs {
     /// and write it (atomically) when the bake ends.
     #[arg(long)]
     pub(crate) checkpoint: Option<PathBuf>,
-    /// Width of the light-map atlas in texels (16 to 16384).
-    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(16..=16384))]
-    pub(crate) lightmap_width: u32,
+    /// Light-map texels along a triangle's chart (4 to 256; fewer where the atlas would pass
+    /// 8 M texels); the renderer's atlas.
+    #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u32).range(4..=256))]
+    pub(crate) lightmap_cell: u32,
     #[command(flatten)]
     pub(crate) hierarchy: HierarchyArgs,
     #[command(flatten)]

@@ -175,19 +175,20 @@ fn finite(x: f64) -> Value {
     if x.is_finite() { json!(x) } else { Value::Null }
 }
 
-/// Writes the light map as Radiance HDR (linear) and a tone-mapped sRGB PNG preview.
+/// Writes the light map as OpenEXR (linear f32 RGB) and a tone-mapped sRGB PNG preview.
 pub fn write_lightmaps(dir: &Path, map: &LightMap) -> anyhow::Result<()> {
-    let (w, h) = (map.width as usize, map.height as usize);
-    let mut hdr = Vec::new();
-    let pixels: Vec<image::Rgb<f32>> = map
+    let data: Vec<f32> = map
         .texels
         .iter()
-        .map(|t| image::Rgb(t.map(|v| if v.is_finite() { v.max(0.0) } else { 0.0 })))
+        .flat_map(|t| t.map(|v| if v.is_finite() { v.max(0.0) } else { 0.0 }))
         .collect();
-    image::codecs::hdr::HdrEncoder::new(&mut hdr)
-        .encode(&pixels, w, h)
-        .context("encoding the HDR light map")?;
-    write_atomic(&dir.join("lightmap.hdr"), &hdr)?;
+    let img =
+        image::Rgb32FImage::from_raw(map.width, map.height, data).context("light-map size")?;
+    let mut exr = std::io::Cursor::new(Vec::new());
+    image::DynamicImage::ImageRgb32F(img)
+        .write_to(&mut exr, image::ImageFormat::OpenExr)
+        .context("encoding the EXR light map")?;
+    write_atomic(&dir.join("lightmap.exr"), exr.get_ref())?;
     let png = preview_png(map.width, map.height, &map.texels)?;
     write_atomic(&dir.join("lightmap.png"), &png)
 }

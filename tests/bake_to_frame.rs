@@ -93,6 +93,14 @@ fn cornell_light_map_texels_match_mitsuba_and_agree_across_shared_edges() {
         .expect("solve");
     let rs = radiant::bridge::render_scene(&scene, Some(&bake), 32).expect("render scene");
     let lm = rs.lightmap.as_ref().expect("a light map");
+    // The CLI's light map is the same atlas (`radiant bake` writes it as lightmap.exr).
+    let atlas = radiant::scene::atlas::Atlas::new(&scene, 32).expect("atlas");
+    assert_eq!((atlas.width, atlas.height), (lm.width, lm.height));
+    for (t, uv) in atlas.uv.iter().enumerate() {
+        for k in 0..3 {
+            assert_eq!(uv[k].to_array(), rs.vertices[t * 3 + k].lightmap_uv);
+        }
+    }
     let vert = |t: usize, k: usize| &rs.vertices[t * 3 + k];
     let pos = |t: usize, k: usize| rs.origin + glam::Vec3::from(vert(t, k).position).as_dvec3();
     // At the 24 path-traced points: the texel value as the renderer reads it (albedo × H + E).

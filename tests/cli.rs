@@ -32,7 +32,7 @@ fn bake_writes_every_output() {
         "surfaces.csv",
         "patches.csv",
         "report.json",
-        "lightmap.hdr",
+        "lightmap.exr",
         "lightmap.png",
     ] {
         assert!(out.join(f).is_file(), "{f} missing");

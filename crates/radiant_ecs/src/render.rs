@@ -158,22 +158,7 @@ impl Plugin for RenderPlugin {
 /// The bake's radiosity already holds the punctual lights' direct light, with shadows, so a
 /// frame drawn from this light map must not add the lights again: [`lit_by_bake`] removes them.
 pub fn fill_lightmap(rs: &mut RenderScene, scene: &Scene, mesh: &Mesh, field: &SmoothField) {
-    // Scene triangle → bake input triangle (the bake meshes the static part only).
-    let mut next = 0u32;
-    let to_root: Vec<Option<u32>> = scene
-        .triangles
-        .iter()
-        .map(|t| {
-            let dynamic = scene
-                .surfaces
-                .get(t.surface as usize)
-                .is_none_or(|s| s.dynamic);
-            (!dynamic).then(|| {
-                next += 1;
-                next - 1
-            })
-        })
-        .collect();
+    let to_root = radiant_radiosity::lightmap::static_roots(scene);
     rs.fill_lightmap(|t| {
         let (Some(tri), Some(Some(root))) =
             (scene.triangles.get(t.triangle), to_root.get(t.triangle))

@@ -110,11 +110,11 @@ impl CameraView {
 
 /// The largest light-map side [`RenderScene::from_scene`] makes (the WebGPU minimum of
 /// `max_texture_dimension_2d` is 8192).
-pub const MAX_LIGHTMAP_SIDE: u32 = 8192;
+pub const MAX_LIGHTMAP_SIDE: u32 = radiant_scene::atlas::MAX_SIDE;
 
-/// The most texels [`RenderScene::from_scene`] gives its grid atlas: a scene with many triangles
-/// gets fewer texels per triangle (down to 4 × 4), not a larger map.
-pub const MAX_LIGHTMAP_TEXELS: u64 = 8 << 20;
+/// The most texels [`RenderScene::from_scene`] gives its atlas (`radiant_scene::atlas`): a
+/// scene with many triangles gets fewer texels per triangle (down to 4 × 4), not a larger map.
+pub const MAX_LIGHTMAP_TEXELS: u64 = radiant_scene::atlas::MAX_TEXELS;
 
 /// A light map: incident radiance-weighted irradiance per texel (`H`, the bake's units: a
 /// surface of albedo `a` reflects radiance `a · H`), linear RGB.
@@ -227,55 +227,31 @@ impl RenderScene {
         let origin = (lo + hi) * 0.5;
         let (materials, surface_material, factors) = materials(scene);
         let mut of_surface: Vec<Vec<u32>> = vec![Vec::new(); scene.surfaces.len()];
-        let mut slot = Vec::with_capacity(scene.triangles.len());
         for (i, t) in scene.triangles.iter().enumerate() {
-            let list = &mut of_surface[t.surface as usize];
-            slot.push(list.len() as u32);
-            list.push(i as u32);
+            of_surface[t.surface as usize].push(i as u32);
         }
-        // The atlas: one block of charts per surface, in cells; then the cell size that fits.
-        let counts: Vec<usize> = of_surface.iter().map(Vec::len).collect();
-        let (blocks, cols, rows) = crate::instancing::pack_blocks(&counts);
-        let cells = u64::from(cols) * u64::from(rows);
-        let fit = ((MAX_LIGHTMAP_TEXELS as f64 / cells as f64).sqrt() as u32)
-            .min(MAX_LIGHTMAP_SIDE / cols.max(rows));
-        let asked = cell.clamp(4, 256);
-        let cell = asked.min(fit).max(4);
-        if cell < asked {
+        // The atlas (sizes checked before anything is allocated).
+        let atlas = radiant_scene::atlas::Atlas::new(scene, cell).map_err(|e| {
+            RenderError::InvalidSize {
+                width: e.width.min(u64::from(u32::MAX)) as u32,
+                height: e.height.min(u64::from(u32::MAX)) as u32,
+                max: MAX_LIGHTMAP_SIDE,
+            }
+        })?;
+        if atlas.cell < cell.clamp(4, 256) {
             tracing::debug!(
-                "light-map cell {asked} → {cell} texels for {} triangles (at most {MAX_LIGHTMAP_TEXELS} texels)",
+                "light-map cell {cell} → {} texels for {} triangles (at most {MAX_LIGHTMAP_TEXELS} texels)",
+                atlas.cell,
                 scene.triangles.len()
             );
         }
-        // Sizes in u64, checked before anything is allocated.
-        let (w64, h64) = (
-            u64::from(cols) * u64::from(cell),
-            u64::from(rows) * u64::from(cell),
-        );
-        if w64 > u64::from(MAX_LIGHTMAP_SIDE) || h64 > u64::from(MAX_LIGHTMAP_SIDE) {
-            return Err(RenderError::InvalidSize {
-                width: w64.min(u64::from(u32::MAX)) as u32,
-                height: h64.min(u64::from(u32::MAX)) as u32,
-                max: MAX_LIGHTMAP_SIDE,
-            });
-        }
-        let (w, h) = (w64 as u32, h64 as u32);
+        let (blocks, cell, w, h) = (&atlas.blocks, atlas.cell, atlas.width, atlas.height);
         let mut vertices = Vec::with_capacity(scene.triangles.len() * 3);
         for (i, t) in scene.triangles.iter().enumerate() {
             let s = &scene.surfaces[t.surface as usize];
             let face = t.cross().normalize_or_zero().as_vec3();
             let albedo = factors[t.surface as usize];
-            let (b, k) = (blocks[t.surface as usize], slot[i]);
-            let (cx, cy) = ((b.x + k % b.width) * cell, (b.y + k / b.width) * cell);
-            let inset = 1.0;
-            let span = cell as f32 - 2.0 * inset - 1.0;
-            let corner = |u: f32, v: f32| {
-                [
-                    (cx as f32 + inset + 0.5 + u * span) / w as f32,
-                    (cy as f32 + inset + 0.5 + v * span) / h as f32,
-                ]
-            };
-            let uvs = [corner(0.0, 0.0), corner(1.0, 0.0), corner(0.0, 1.0)];
+            let uvs = atlas.uv[i].map(|c| c.to_array());
             for (k, p) in t.vertices.iter().enumerate() {
                 let n = t.normals[k];
                 let normal = if n.is_finite() && n.length_squared() > 0.5 {
@@ -447,40 +423,29 @@ impl RenderScene {
         let Some(lm) = self.lightmap.as_mut() else {
             return;
         };
-        if lm.texels.len() as u64 != u64::from(lm.width) * u64::from(lm.height) {
-            return;
-        }
-        let (w, hgt) = (lm.width as f32, lm.height as f32);
-        for (index, tri) in self.vertices.chunks_exact(3).enumerate() {
-            let uv = [&tri[0], &tri[1], &tri[2]]
-                .map(|v| glam::Vec2::from(v.lightmap_uv) * glam::Vec2::new(w, hgt));
-            let lo = uv[0].min(uv[1]).min(uv[2]).floor() - 1.0;
-            let hi = uv[0].max(uv[1]).max(uv[2]).ceil() + 1.0;
-            let (e1, e2) = (uv[1] - uv[0], uv[2] - uv[0]);
-            let det = e1.perp_dot(e2);
-            if det.abs() < 1e-12 {
-                continue;
-            }
-            for y in lo.y.max(0.0) as u32..(hi.y as u32).min(lm.height) {
-                for x in lo.x.max(0.0) as u32..(hi.x as u32).min(lm.width) {
-                    let p = glam::Vec2::new(x as f32 + 0.5, y as f32 + 0.5) - uv[0];
-                    // Barycentrics, clamped onto the triangle so the border texels dilate it.
-                    let u = (p.perp_dot(e2) / det).clamp(0.0, 1.0);
-                    let v = (e1.perp_dot(p) / det).clamp(0.0, 1.0 - u);
-                    let pos = Vec3::from(tri[0].position)
-                        + (Vec3::from(tri[1].position) - Vec3::from(tri[0].position)) * u
-                        + (Vec3::from(tri[2].position) - Vec3::from(tri[0].position)) * v;
-                    let texel = LightmapTexel {
-                        triangle: index,
-                        u,
-                        v,
-                        position: self.origin + pos.as_dvec3(),
-                        normal: face_normal(tri),
-                    };
-                    lm.texels[(y * lm.width + x) as usize] = h(&texel);
-                }
-            }
-        }
+        let (origin, vertices) = (self.origin, &self.vertices);
+        let charts = vertices.chunks_exact(3).enumerate().map(|(index, tri)| {
+            (
+                index,
+                [0, 1, 2].map(|k| Vec2::from(tri[k].lightmap_uv)),
+                [0, 1, 2].map(|k| origin + Vec3::from(tri[k].position).as_dvec3()),
+            )
+        });
+        radiant_scene::atlas::rasterize(
+            lm.width,
+            lm.height,
+            &mut lm.texels,
+            charts,
+            |index, u, v, position| {
+                h(&LightmapTexel {
+                    triangle: index,
+                    u,
+                    v,
+                    position,
+                    normal: face_normal(&vertices[index * 3..index * 3 + 3]),
+                })
+            },
+        );
     }
 
     /// A smooth synthetic light map: the unoccluded irradiance from every emissive triangle,

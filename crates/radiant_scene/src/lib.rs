@@ -10,6 +10,7 @@
 //! assert!(scene.has_emitters());
 //! ```
 
+pub mod atlas;
 mod gltf_import;
 pub mod sky;
 pub mod texture;
