@@ -92,6 +92,8 @@ pub struct RenderState {
     pub error: Option<String>,
     /// The last measured pass times ([`render_to`] with `timed`).
     pub timings: Option<radiant_render::graph::PassTimings>,
+    /// The light map's atlas as last uploaded.
+    pub atlas: Option<AtlasReport>,
     pending_overlay: Option<Option<Arc<dyn radiant_post::overlay::Overlay>>>,
 }
 
@@ -100,6 +102,21 @@ impl RenderState {
     pub fn graph(&self) -> Option<&radiant_render::graph::GraphReport> {
         self.renderer.as_ref().and_then(|r| r.report())
     }
+}
+
+/// The light-map atlas of the uploaded scene, for the inspector.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AtlasReport {
+    /// Width in texels.
+    pub width: u32,
+    /// Height in texels.
+    pub height: u32,
+    /// Texels along a chart's side.
+    pub cell: u32,
+    /// Share of texels inside triangles.
+    pub utilisation: f64,
+    /// Texels per scene unit, area-weighted.
+    pub texel_density: f64,
 }
 
 /// The last frame read back (with [`RenderSettings::capture`]).
@@ -247,7 +264,18 @@ fn build_scene(
         fill_lightmap(&mut rs, &scene, mesh, field);
         lit_by_bake(&mut rs);
     }
-    world.resource_mut::<RenderState>().scene = Some(Arc::new(scene));
+    let atlas = radiant_scene::atlas::Atlas::new(&scene, settings.lightmap_cell)
+        .ok()
+        .map(|a| AtlasReport {
+            width: a.width,
+            height: a.height,
+            cell: a.cell,
+            utilisation: a.utilisation(),
+            texel_density: a.texel_density(&scene),
+        });
+    let mut state = world.resource_mut::<RenderState>();
+    state.scene = Some(Arc::new(scene));
+    state.atlas = atlas;
     Ok(Some(rs))
 }
 

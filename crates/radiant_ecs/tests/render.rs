@@ -123,6 +123,11 @@ fn extraction_uploads_only_what_changed() {
     app.update();
     let uploads = |app: &App| app.world.resource::<RenderState>().uploads;
     assert_eq!(uploads(&app), 1);
+    // The inspector's figures of the uploaded light map's atlas.
+    let atlas = app.world.resource::<RenderState>().atlas.expect("an atlas");
+    assert!(
+        atlas.width > 0 && atlas.cell >= 4 && atlas.utilisation > 0.0 && atlas.texel_density > 0.0
+    );
     let first = app
         .world
         .resource::<LastFrame>()

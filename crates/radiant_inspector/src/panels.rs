@@ -517,6 +517,16 @@ pub fn performance_panel(ui: &mut Ui, world: &mut World, state: &mut InspectorSt
                 ui.end_row();
             });
     }
+    if let Some(a) = &render.atlas {
+        ui.label(format!(
+            "light map: {}×{} texels, {} per chart side, {:.0} % inside triangles, {:.1} texels/m",
+            a.width,
+            a.height,
+            a.cell,
+            a.utilisation * 100.0,
+            a.texel_density
+        ));
+    }
     if let Some(g) = render.graph() {
         ui.label(format!(
             "graph: {} passes ({} culled), {} textures in {} allocations, {:.1} MiB",

@@ -355,6 +355,18 @@ fn performance_panel_shows_timings() {
     h.get_by_label_contains("frame: 16.00 ms median over 3 frames");
     h.get_by_label("3.750 ms");
     snapshot(&mut h, "performance_panel");
+    h.state_mut().world.resource_mut::<RenderState>().atlas =
+        Some(radiant_ecs::render::AtlasReport {
+            width: 224,
+            height: 224,
+            cell: 32,
+            utilisation: 0.318,
+            texel_density: 123.4,
+        });
+    h.run();
+    h.get_by_label_contains(
+        "light map: 224×224 texels, 32 per chart side, 32 % inside triangles, 123.4 texels/m",
+    );
 }
 
 #[test]

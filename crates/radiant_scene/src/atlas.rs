@@ -46,9 +46,7 @@ pub fn pack_blocks(counts: &[usize]) -> (Vec<Block>, u32, u32) {
         .map(|b| u64::from(b.width) * u64::from(b.height))
         .sum();
     let widest = blocks.iter().map(|b| b.width).max().unwrap_or(1);
-    let side = ((total as f64 * 1.05).sqrt().ceil() as u32)
-        .max(widest)
-        .max(1);
+    let side = ((total as f64).sqrt().ceil() as u32).max(widest).max(1);
     let mut order: Vec<usize> = (0..blocks.len()).filter(|&s| counts[s] > 0).collect();
     order.sort_by_key(|&s| (std::cmp::Reverse(blocks[s].height), s));
     let (mut x, mut y, mut shelf) = (0u32, 0u32, 0u32);
@@ -145,6 +143,24 @@ impl Atlas {
             blocks,
             uv,
         })
+    }
+
+    /// Texels per scene unit along a surface, area-weighted over `scene`'s triangles (each
+    /// chart's texels inside its triangle over the triangle's area, square-rooted).
+    pub fn texel_density(&self, scene: &Scene) -> f64 {
+        let inside = {
+            let s = self.cell as f64 - 3.0;
+            0.5 * s * s
+        };
+        let (mut sum, mut area) = (0.0, 0.0);
+        for t in &scene.triangles {
+            let a = t.area();
+            if a > 0.0 && a.is_finite() {
+                sum += a * (inside / a).sqrt();
+                area += a;
+            }
+        }
+        if area > 0.0 { sum / area } else { 0.0 }
     }
 
     /// The share of texels inside some chart's triangle.
@@ -244,5 +260,20 @@ mod tests {
             assert!(cells.insert(cell), "two charts in cell {cell:?}");
         }
         assert!(atlas.utilisation() > 0.2, "{}", atlas.utilisation());
+    }
+
+    #[test]
+    fn texel_density_is_texels_inside_a_chart_per_unit_of_length() {
+        // One right triangle of legs 2: area 2; 32-texel charts hold 0.5 · 29² texels.
+        let mut scene = Scene::default();
+        scene.surfaces.push(crate::Surface::default());
+        scene.triangles.push(crate::Triangle::new(
+            [DVec3::ZERO, DVec3::X * 2.0, DVec3::Y * 2.0],
+            0,
+        ));
+        let atlas = Atlas::new(&scene, 32).expect("atlas");
+        let want = (0.5 * 29.0f64 * 29.0 / 2.0).sqrt();
+        assert!((atlas.texel_density(&scene) - want).abs() < 1e-9);
+        assert!((atlas.utilisation() - 0.5 * 29.0 * 29.0 / (32.0 * 32.0)).abs() < 1e-9);
     }
 }
