@@ -97,8 +97,8 @@ fn cornell_light_map_texels_match_mitsuba_and_agree_across_shared_edges() {
     let atlas = radiant::scene::atlas::Atlas::new(&scene, 32).expect("atlas");
     assert_eq!((atlas.width, atlas.height), (lm.width, lm.height));
     for (t, uv) in atlas.uv.iter().enumerate() {
-        for k in 0..3 {
-            assert_eq!(uv[k].to_array(), rs.vertices[t * 3 + k].lightmap_uv);
+        for (k, c) in uv.iter().enumerate() {
+            assert_eq!(c.to_array(), rs.vertices[t * 3 + k].lightmap_uv);
         }
     }
     let vert = |t: usize, k: usize| &rs.vertices[t * 3 + k];

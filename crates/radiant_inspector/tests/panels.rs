@@ -360,7 +360,7 @@ fn performance_panel_shows_timings() {
             width: 224,
             height: 224,
             cell: 32,
-            utilisation: 0.318,
+            utilisation: 0.32,
             texel_density: 123.4,
         });
     h.run();
