@@ -274,6 +274,37 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     let map = lightmap::bake_lightmap(&scene, &atlas, &result.mesh, &field);
     let lightmap_s = lap.elapsed().as_secs_f64();
     output::write_lightmaps(out, &map)?;
+    let export = match &args.export {
+        Some(path) => {
+            let lap = Instant::now();
+            let r = radiant::scene::gltf_export::export_gltf(
+                &scene,
+                Some(radiant::scene::gltf_export::LightmapExport {
+                    atlas: &atlas,
+                    texels: &map.texels,
+                }),
+                path,
+            )?;
+            println!(
+                "exported {} ({} primitives, light map texture {}, {:.2} MB) in {:.2} s",
+                path.display(),
+                r.primitives,
+                r.lightmap_texture
+                    .map_or("none".to_string(), |t| t.to_string()),
+                r.bytes as f64 / 1e6,
+                lap.elapsed().as_secs_f64()
+            );
+            json!({
+                "path": path.display().to_string(),
+                "primitives": r.primitives,
+                "lightmap_texture": r.lightmap_texture,
+                "lightmap_scale": r.lightmap_scale,
+                "bytes": r.bytes,
+                "seconds": lap.elapsed().as_secs_f64(),
+            })
+        }
+        None => serde_json::Value::Null,
+    };
     let total_s = start.elapsed().as_secs_f64();
     let extra = json!({
         "patch_size": params.mesh.patch_size,
@@ -290,6 +321,7 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
             "utilisation": atlas.utilisation(),
             "seconds": lightmap_s,
         },
+        "export": export,
     });
     let mut report = output::report_json(
         &source,

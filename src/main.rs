@@ -137,6 +137,11 @@ pub(crate) struct BakeArgs {
     /// and write it (atomically) when the bake ends.
     #[arg(long)]
     pub(crate) checkpoint: Option<PathBuf>,
+    /// Also write the scene with its light map as binary glTF for other engines: TEXCOORD_1 on
+    /// every baked primitive, the light map as an image, named in each primitive's extras
+    /// (`lightmap`: texture, texCoord, scale, encoding).
+    #[arg(long)]
+    pub(crate) export: Option<PathBuf>,
     /// Light-map texels along a triangle's chart (4 to 256; fewer where the atlas would pass
     /// 8 M texels); the renderer's atlas.
     #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u32).range(4..=256))]

@@ -590,3 +590,53 @@ fn converge_on_a_scene_file_path_traces_its_reference() {
     assert!(err(&rows[1]) < err(&rows[0]), "finer is closer: {csv}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn bake_exports_binary_gltf_that_the_khronos_validator_accepts() {
+    let out = tmp("export");
+    std::fs::create_dir_all(&out).expect("dir");
+    let glb = out.join("cornell.glb");
+    let stdout = run_ok(
+        &[
+            "bake",
+            "--builtin",
+            "cornell-box",
+            "--patch-size",
+            "0.3",
+            "--export",
+            glb.to_str().expect("utf-8 path"),
+        ],
+        &out,
+    );
+    assert!(stdout.contains("exported"), "{stdout}");
+    let bytes = std::fs::read(&glb).expect("the .glb");
+    assert_eq!(&bytes[..4], b"glTF");
+    let report: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).expect("report"))
+            .expect("json");
+    assert_eq!(report["parameters"]["export"]["primitives"], 19);
+    // The Khronos validator, where npm put it (tools/test.sh installs it when npm exists).
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let modules = std::env::var_os("RADIANT_GLTF_VALIDATOR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("target/gltf-validator/node_modules"));
+    let node = std::process::Command::new("node").arg("--version").output();
+    if node.is_err() || !modules.join("gltf-validator").exists() {
+        eprintln!(
+            "not validated: no node or no gltf-validator in {} (npm install --prefix target/gltf-validator gltf-validator)",
+            modules.display()
+        );
+        return;
+    }
+    let v = std::process::Command::new("node")
+        .arg(root.join("tools/validate_gltf.js"))
+        .arg(&glb)
+        .env("NODE_PATH", &modules)
+        .output()
+        .expect("node runs");
+    let text = String::from_utf8_lossy(&v.stdout);
+    eprintln!("gltf-validator: {text}");
+    let r: serde_json::Value = serde_json::from_str(text.trim()).expect("validator JSON");
+    assert_eq!(r["errors"], 0, "{text}");
+    assert!(v.status.success(), "{text}");
+}

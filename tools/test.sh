@@ -72,6 +72,14 @@ if dpkg -s vulkan-validationlayers >/dev/null 2>&1; then
   export WGPU_VALIDATION="${WGPU_VALIDATION:-0}"
 fi
 
+# The Khronos glTF validator for the export test (npm); without npm the test says it did not
+# validate.
+if command -v npm >/dev/null 2>&1 && [ ! -d target/gltf-validator/node_modules/gltf-validator ]; then
+  say "installing the Khronos glTF validator (npm gltf-validator) into target/gltf-validator"
+  npm install --silent --prefix target/gltf-validator gltf-validator@2.0.0-dev.3.10 ||
+    echo "npm could not install gltf-validator: the export test will say it did not validate" >&2
+fi
+
 say "cargo fmt --check"
 cargo fmt --all --check
 

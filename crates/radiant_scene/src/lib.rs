@@ -11,6 +11,7 @@
 //! ```
 
 pub mod atlas;
+pub mod gltf_export;
 mod gltf_import;
 pub mod sky;
 pub mod texture;
@@ -137,6 +138,9 @@ pub enum SceneError {
     /// No builtin scene of that name.
     #[error("no builtin scene '{0}' (known: cornell-box)")]
     UnknownBuiltin(String),
+    /// Writing a glTF file failed.
+    #[error("glTF export: {0}")]
+    Export(String),
 }
 
 /// A named surface: one glTF node primitive, with its material.

@@ -1,0 +1,641 @@
+//! glTF 2.0 export of a scene and its light map, for other engines (written with the `gltf`
+//! crate's typed JSON model, `gltf::json`).
+//!
+//! Every surface becomes one mesh of one primitive (positions relative to the scene's centre,
+//! which its node's translation restores; normals; TEXCOORD_0 with `KHR_texture_transform`
+//! already applied (the scene's own first set on untextured surfaces); TEXCOORD_1 on the
+//! light-map atlas) and one material (base colour factor and
+//! texture, emission, alpha mode). Double-sided surfaces are written as their two sides, each
+//! with its own light (`doubleSided` false). Base-colour images are written again as PNG.
+//!
+//! The light map is one PNG image, sRGB-encoded 8-bit: a texel `t` (in [0, 1] per channel)
+//! stands for the incident radiance `H = scale · srgb_to_linear(t)`, so a surface of base colour
+//! `a` reflects `a · H` (glTF emissive units). Each baked primitive names it in its `extras`:
+//! `{"lightmap": {"texture": T, "texCoord": 1, "scale": S, "encoding": "srgb"}}`, `T` the index
+//! into `textures`. Punctual lights are not written: their light is in the light map.
+
+use std::path::Path;
+
+use glam::{DVec3, Vec2};
+use gltf::json;
+use gltf::json::validation::{Checked, USize64};
+
+use crate::atlas::Atlas;
+use crate::{AlphaMode, Scene, SceneError};
+
+/// A light map to write: texels (`atlas.width × atlas.height`, linear RGB `H`, row-major) on
+/// `atlas`.
+pub struct LightmapExport<'a> {
+    /// The atlas the texels are on (its `uv` become TEXCOORD_1).
+    pub atlas: &'a Atlas,
+    /// The texels.
+    pub texels: &'a [[f32; 3]],
+}
+
+/// Where the light map went in the file.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ExportReport {
+    /// Primitives written.
+    pub primitives: usize,
+    /// Index of the light map in `textures`, if one was written.
+    pub lightmap_texture: Option<usize>,
+    /// The light map's scale (`H = scale · srgb_to_linear(texel)`).
+    pub lightmap_scale: f32,
+    /// Bytes written.
+    pub bytes: usize,
+}
+
+fn err(what: impl Into<String>) -> SceneError {
+    SceneError::Export(what.into())
+}
+
+/// Writes `scene` (and `lightmap`) to `path` as binary glTF (`.glb`), atomically (a temporary
+/// file, then a rename).
+pub fn export_gltf(
+    scene: &Scene,
+    lightmap: Option<LightmapExport<'_>>,
+    path: &Path,
+) -> Result<ExportReport, SceneError> {
+    if let Some(lm) = &lightmap
+        && (lm.atlas.uv.len() != scene.triangles.len()
+            || lm.texels.len() != lm.atlas.width as usize * lm.atlas.height as usize)
+    {
+        return Err(err("the light map does not match the scene's atlas"));
+    }
+    if !path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("glb"))
+    {
+        return Err(err(format!(
+            "{}: Radiant writes binary glTF: name the file .glb",
+            path.display()
+        )));
+    }
+    let mut w = Writer::default();
+    let mut root = json::Root {
+        asset: json::Asset {
+            generator: Some(format!("Radiant {}", env!("CARGO_PKG_VERSION"))),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    // Images: the base-colour ones, then the light map.
+    let mut image_texture: Vec<Option<json::Index<json::Texture>>> = vec![None; scene.images.len()];
+    let mut samplers: Vec<(crate::texture::Sampler, json::Index<json::texture::Sampler>)> =
+        Vec::new();
+    let mut means: Vec<Option<[f64; 4]>> = vec![None; scene.images.len()];
+    let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    for t in &scene.triangles {
+        for v in t.vertices {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+    }
+    let origin = if lo.is_finite() && hi.is_finite() {
+        (lo + hi) * 0.5
+    } else {
+        DVec3::ZERO
+    };
+    let lightmap_texture = match &lightmap {
+        Some(lm) => {
+            let peak = lm
+                .texels
+                .iter()
+                .flatten()
+                .copied()
+                .filter(|x| x.is_finite())
+                .fold(0.0f32, f32::max);
+            let scale = if peak > 0.0 { peak } else { 1.0 };
+            let rgb: Vec<u8> = lm
+                .texels
+                .iter()
+                .flatten()
+                .map(|&x| {
+                    let x = if x.is_finite() {
+                        (x / scale).clamp(0.0, 1.0)
+                    } else {
+                        0.0
+                    };
+                    radiant_color::linear_to_srgb8(f64::from(x))
+                })
+                .collect();
+            let png = encode_png(
+                lm.atlas.width,
+                lm.atlas.height,
+                image::ColorType::Rgb8,
+                &rgb,
+            )?;
+            let image = w.image(&mut root, png, "lightmap");
+            let sampler = root.push(json::texture::Sampler {
+                mag_filter: Some(Checked::Valid(json::texture::MagFilter::Linear)),
+                min_filter: Some(Checked::Valid(json::texture::MinFilter::Linear)),
+                wrap_s: Checked::Valid(json::texture::WrappingMode::ClampToEdge),
+                wrap_t: Checked::Valid(json::texture::WrappingMode::ClampToEdge),
+                ..Default::default()
+            });
+            let texture = root.push(json::Texture {
+                name: Some("lightmap".into()),
+                sampler: Some(sampler),
+                source: image,
+                extensions: None,
+                extras: Default::default(),
+            });
+            Some((texture, scale))
+        }
+        None => None,
+    };
+    let mut nodes = Vec::new();
+    let mut primitives = 0;
+    for (s, surface) in scene.surfaces.iter().enumerate() {
+        let tris: Vec<usize> = (0..scene.triangles.len())
+            .filter(|&i| scene.triangles[i].surface as usize == s)
+            .collect();
+        if tris.is_empty() {
+            continue;
+        }
+        // Material.
+        let tex = surface
+            .base_color_texture
+            .filter(|t| (t.image as usize) < scene.images.len());
+        let factor: [f64; 3] = match tex {
+            Some(t) => {
+                let mean = *means[t.image as usize]
+                    .get_or_insert_with(|| scene.images[t.image as usize].mean_linear());
+                std::array::from_fn(|c| {
+                    if mean[c] > 1e-9 {
+                        (surface.reflectance[c] / mean[c]).min(1.0)
+                    } else {
+                        0.0
+                    }
+                })
+            }
+            None => surface.reflectance,
+        };
+        let base_color_texture = match tex {
+            Some(t) => {
+                let i = t.image as usize;
+                let texture = match image_texture[i] {
+                    Some(x) => x,
+                    None => {
+                        let img = &scene.images[i];
+                        let png = encode_png(
+                            img.width,
+                            img.height,
+                            image::ColorType::Rgba8,
+                            &img.pixels,
+                        )?;
+                        let source = w.image(&mut root, png, &img.name);
+                        let sampler = match samplers.iter().find(|(k, _)| *k == t.sampler) {
+                            Some((_, x)) => *x,
+                            None => {
+                                let x = root.push(sampler(t.sampler));
+                                samplers.push((t.sampler, x));
+                                x
+                            }
+                        };
+                        let x = root.push(json::Texture {
+                            name: Some(img.name.clone()),
+                            sampler: Some(sampler),
+                            source,
+                            extensions: None,
+                            extras: Default::default(),
+                        });
+                        image_texture[i] = Some(x);
+                        x
+                    }
+                };
+                Some(json::texture::Info {
+                    index: texture,
+                    tex_coord: 0,
+                    extensions: None,
+                    extras: Default::default(),
+                })
+            }
+            None => None,
+        };
+        let peak = surface.emission.iter().fold(0.0f64, |m, &e| m.max(e));
+        let (emissive, strength) = if peak > 1.0 {
+            (surface.emission.map(|e| (e / peak) as f32), Some(peak))
+        } else {
+            (surface.emission.map(|e| e as f32), None)
+        };
+        let (alpha_mode, alpha_cutoff) = match surface.alpha {
+            AlphaMode::Opaque => (json::material::AlphaMode::Opaque, None),
+            AlphaMode::Mask { cutoff } => (
+                json::material::AlphaMode::Mask,
+                Some(json::material::AlphaCutoff(cutoff as f32)),
+            ),
+            AlphaMode::Blend => (json::material::AlphaMode::Blend, None),
+        };
+        let material = root.push(json::Material {
+            name: Some(surface.material.clone()),
+            alpha_cutoff,
+            alpha_mode: Checked::Valid(alpha_mode),
+            double_sided: false,
+            pbr_metallic_roughness: json::material::PbrMetallicRoughness {
+                base_color_factor: json::material::PbrBaseColorFactor([
+                    factor[0] as f32,
+                    factor[1] as f32,
+                    factor[2] as f32,
+                    surface.base_color_alpha as f32,
+                ]),
+                base_color_texture,
+                metallic_factor: json::material::StrengthFactor(0.0),
+                roughness_factor: json::material::StrengthFactor(1.0),
+                ..Default::default()
+            },
+            emissive_factor: json::material::EmissiveFactor(emissive),
+            extensions: strength.map(|s| json::extensions::material::Material {
+                emissive_strength: Some(json::extensions::material::EmissiveStrength {
+                    emissive_strength: json::extensions::material::EmissiveStrengthFactor(s as f32),
+                }),
+            }),
+            ..Default::default()
+        });
+        // Vertex data, three vertices per triangle.
+        let mut pos = Vec::with_capacity(tris.len() * 9);
+        let mut nrm = Vec::with_capacity(tris.len() * 9);
+        let mut uv0 = Vec::with_capacity(tris.len() * 6);
+        let mut uv1 = Vec::with_capacity(tris.len() * 6);
+        for &i in &tris {
+            let t = &scene.triangles[i];
+            let face = t.cross().normalize_or(DVec3::Z).as_vec3();
+            for k in 0..3 {
+                pos.extend((t.vertices[k] - origin).as_vec3().to_array());
+                let n = t.normals[k];
+                let n = if n.is_finite() && n.length_squared() > 0.5 {
+                    n.normalize()
+                } else {
+                    face
+                };
+                nrm.extend(n.to_array());
+                // TEXCOORD_0: the base colour's coordinates (transformed), or the scene's own
+                // first set (glTF wants TEXCOORD_0 wherever TEXCOORD_1 is).
+                let uv = match tex {
+                    Some(tex) => tex.uv([t.uv[0][k], t.uv[1][k]]),
+                    None => t.uv[0][k],
+                };
+                let uv = if uv.is_finite() { uv } else { Vec2::ZERO };
+                uv0.extend(uv.to_array());
+                if let Some(lm) = &lightmap {
+                    uv1.extend(lm.atlas.uv[i][k].to_array());
+                }
+            }
+        }
+        let count = tris.len() * 3;
+        let mut attributes = std::collections::BTreeMap::new();
+        attributes.insert(
+            Checked::Valid(json::mesh::Semantic::Positions),
+            w.accessor(&mut root, &pos, count, json::accessor::Type::Vec3, true),
+        );
+        attributes.insert(
+            Checked::Valid(json::mesh::Semantic::Normals),
+            w.accessor(&mut root, &nrm, count, json::accessor::Type::Vec3, false),
+        );
+        if !uv0.is_empty() {
+            attributes.insert(
+                Checked::Valid(json::mesh::Semantic::TexCoords(0)),
+                w.accessor(&mut root, &uv0, count, json::accessor::Type::Vec2, false),
+            );
+        }
+        let mut extras = Default::default();
+        if !uv1.is_empty() {
+            attributes.insert(
+                Checked::Valid(json::mesh::Semantic::TexCoords(1)),
+                w.accessor(&mut root, &uv1, count, json::accessor::Type::Vec2, false),
+            );
+            if let Some((texture, scale)) = lightmap_texture {
+                let e = serde_json::json!({ "lightmap": {
+                    "texture": texture.value(),
+                    "texCoord": 1,
+                    "scale": scale,
+                    "encoding": "srgb",
+                }});
+                extras = Some(
+                    serde_json::value::RawValue::from_string(e.to_string())
+                        .map_err(|e| err(format!("extras: {e}")))?,
+                );
+            }
+        }
+        let mesh = root.push(json::Mesh {
+            name: Some(surface.name.clone()),
+            primitives: vec![json::mesh::Primitive {
+                attributes,
+                extensions: None,
+                extras,
+                indices: None,
+                material: Some(material),
+                mode: Checked::Valid(json::mesh::Mode::Triangles),
+                targets: None,
+            }],
+            weights: None,
+            extensions: None,
+            extras: Default::default(),
+        });
+        primitives += 1;
+        nodes.push(root.push(json::Node {
+            name: Some(surface.name.clone()),
+            mesh: Some(mesh),
+            translation: Some(origin.as_vec3().to_array()),
+            ..Default::default()
+        }));
+    }
+    let scene_index = root.push(json::Scene {
+        name: None,
+        nodes,
+        extensions: None,
+        extras: Default::default(),
+    });
+    root.scene = Some(scene_index);
+    if strength_used(&root) {
+        root.extensions_used
+            .push("KHR_materials_emissive_strength".into());
+    }
+    let bytes = w.finish(&mut root)?;
+    write_atomic(path, &bytes)?;
+    Ok(ExportReport {
+        primitives,
+        lightmap_texture: lightmap_texture.map(|(t, _)| t.value()),
+        lightmap_scale: lightmap_texture.map_or(0.0, |(_, s)| s),
+        bytes: bytes.len(),
+    })
+}
+
+fn strength_used(root: &json::Root) -> bool {
+    root.materials.iter().any(|m| {
+        m.extensions
+            .as_ref()
+            .is_some_and(|e| e.emissive_strength.is_some())
+    })
+}
+
+fn sampler(s: crate::texture::Sampler) -> json::texture::Sampler {
+    use crate::texture::Wrap;
+    let wrap = |w: Wrap| {
+        Checked::Valid(match w {
+            Wrap::Repeat => json::texture::WrappingMode::Repeat,
+            Wrap::MirroredRepeat => json::texture::WrappingMode::MirroredRepeat,
+            Wrap::ClampToEdge => json::texture::WrappingMode::ClampToEdge,
+        })
+    };
+    json::texture::Sampler {
+        mag_filter: Some(Checked::Valid(if s.nearest {
+            json::texture::MagFilter::Nearest
+        } else {
+            json::texture::MagFilter::Linear
+        })),
+        min_filter: Some(Checked::Valid(json::texture::MinFilter::LinearMipmapLinear)),
+        wrap_s: wrap(s.wrap_s),
+        wrap_t: wrap(s.wrap_t),
+        ..Default::default()
+    }
+}
+
+fn encode_png(
+    width: u32,
+    height: u32,
+    color: image::ColorType,
+    data: &[u8],
+) -> Result<Vec<u8>, SceneError> {
+    use image::ImageEncoder;
+    let mut out = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut out)
+        .write_image(data, width, height, color.into())
+        .map_err(|e| err(format!("PNG encoding: {e}")))?;
+    Ok(out)
+}
+
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), SceneError> {
+    let tmp = path.with_extension("tmp-export");
+    std::fs::write(&tmp, bytes)
+        .and_then(|()| std::fs::rename(&tmp, path))
+        .map_err(|e| err(format!("{}: {e}", path.display())))
+}
+
+/// The binary buffer being built: one buffer view per accessor or image, 4-byte aligned.
+#[derive(Default)]
+struct Writer {
+    bin: Vec<u8>,
+}
+
+impl Writer {
+    fn view(
+        &mut self,
+        root: &mut json::Root,
+        data: &[u8],
+        target: Option<json::buffer::Target>,
+    ) -> json::Index<json::buffer::View> {
+        while !self.bin.len().is_multiple_of(4) {
+            self.bin.push(0);
+        }
+        let offset = self.bin.len();
+        self.bin.extend_from_slice(data);
+        root.push(json::buffer::View {
+            buffer: json::Index::new(0),
+            byte_length: USize64::from(data.len()),
+            byte_offset: Some(USize64::from(offset)),
+            byte_stride: None,
+            name: None,
+            target: target.map(Checked::Valid),
+            extensions: None,
+            extras: Default::default(),
+        })
+    }
+
+    fn accessor(
+        &mut self,
+        root: &mut json::Root,
+        data: &[f32],
+        count: usize,
+        type_: json::accessor::Type,
+        bounds: bool,
+    ) -> json::Index<json::Accessor> {
+        let bytes: Vec<u8> = data.iter().flat_map(|x| x.to_le_bytes()).collect();
+        let view = self.view(root, &bytes, Some(json::buffer::Target::ArrayBuffer));
+        let (min, max) = if bounds {
+            let n = data.len() / count.max(1);
+            let mut lo = vec![f32::INFINITY; n];
+            let mut hi = vec![f32::NEG_INFINITY; n];
+            for v in data.chunks_exact(n) {
+                for c in 0..n {
+                    lo[c] = lo[c].min(v[c]);
+                    hi[c] = hi[c].max(v[c]);
+                }
+            }
+            (Some(serde_json::json!(lo)), Some(serde_json::json!(hi)))
+        } else {
+            (None, None)
+        };
+        root.push(json::Accessor {
+            buffer_view: Some(view),
+            byte_offset: None,
+            count: USize64::from(count),
+            component_type: Checked::Valid(json::accessor::GenericComponentType(
+                json::accessor::ComponentType::F32,
+            )),
+            extensions: None,
+            extras: Default::default(),
+            type_: Checked::Valid(type_),
+            min,
+            max,
+            name: None,
+            normalized: false,
+            sparse: None,
+        })
+    }
+
+    fn image(
+        &mut self,
+        root: &mut json::Root,
+        png: Vec<u8>,
+        name: &str,
+    ) -> json::Index<json::Image> {
+        let view = self.view(root, &png, None);
+        root.push(json::Image {
+            buffer_view: Some(view),
+            mime_type: Some(json::image::MimeType("image/png".into())),
+            name: Some(name.to_string()),
+            uri: None,
+            extensions: None,
+            extras: Default::default(),
+        })
+    }
+
+    /// The GLB file: header, JSON chunk, binary chunk.
+    fn finish(mut self, root: &mut json::Root) -> Result<Vec<u8>, SceneError> {
+        while !self.bin.len().is_multiple_of(4) {
+            self.bin.push(0);
+        }
+        root.buffers = vec![json::Buffer {
+            byte_length: USize64::from(self.bin.len()),
+            name: None,
+            uri: None,
+            extensions: None,
+            extras: Default::default(),
+        }];
+        let mut text = root.to_vec().map_err(|e| err(format!("JSON: {e}")))?;
+        while !text.len().is_multiple_of(4) {
+            text.push(b' ');
+        }
+        let total = 12 + 8 + text.len() + 8 + self.bin.len();
+        let mut out = Vec::with_capacity(total);
+        out.extend_from_slice(b"glTF");
+        out.extend_from_slice(&2u32.to_le_bytes());
+        out.extend_from_slice(&(total as u32).to_le_bytes());
+        out.extend_from_slice(&(text.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"JSON");
+        out.extend_from_slice(&text);
+        out.extend_from_slice(&(self.bin.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"BIN\0");
+        out.extend_from_slice(&self.bin);
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_round_trip_reads_back_the_scene_its_light_map_uvs_and_the_light_map() {
+        let scene = crate::builtin("cornell-box").expect("builtin");
+        let atlas = Atlas::new(&scene, 16).expect("atlas");
+        // A light map that varies across the atlas.
+        let texels: Vec<[f32; 3]> = (0..atlas.width * atlas.height)
+            .map(|i| {
+                let (x, y) = (i % atlas.width, i / atlas.width);
+                [x as f32 / 40.0, y as f32 / 60.0, 0.25]
+            })
+            .collect();
+        let dir = std::env::temp_dir().join(format!("radiant_export_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let path = dir.join("cornell.glb");
+        let lm = LightmapExport {
+            atlas: &atlas,
+            texels: &texels,
+        };
+        let r = export_gltf(&scene, Some(lm), &path).expect("export");
+        assert_eq!(r.primitives, scene.surfaces.len());
+        let bytes = std::fs::read(&path).expect("read back");
+        let back = crate::load_gltf_slice(&bytes).expect("import");
+        assert_eq!(back.triangles.len(), scene.triangles.len());
+        // Surfaces come back in the importer's order: match them by name.
+        for s in &scene.surfaces {
+            let b = back
+                .surfaces
+                .iter()
+                .position(|x| x.name == s.name)
+                .unwrap_or_else(|| panic!("{} lost", s.name));
+            let bs = &back.surfaces[b];
+            for c in 0..3 {
+                assert!(
+                    (bs.reflectance[c] - s.reflectance[c]).abs() < 1e-6,
+                    "{}",
+                    s.name
+                );
+                assert!(
+                    (bs.emission[c] - s.emission[c]).abs() < 1e-4 * s.emission[c].max(1.0),
+                    "{}",
+                    s.name
+                );
+            }
+            let si = scene
+                .surfaces
+                .iter()
+                .position(|x| x.name == s.name)
+                .expect("own");
+            let ours: Vec<_> = scene
+                .triangles
+                .iter()
+                .enumerate()
+                .filter(|(_, t)| t.surface as usize == si)
+                .collect();
+            let theirs: Vec<_> = back
+                .triangles
+                .iter()
+                .filter(|t| t.surface as usize == b)
+                .collect();
+            assert_eq!(ours.len(), theirs.len());
+            for ((i, t), u) in ours.iter().zip(&theirs) {
+                for k in 0..3 {
+                    assert!((t.vertices[k] - u.vertices[k]).length() < 1e-5);
+                    // Authored TEXCOORD_1 is the atlas, unchanged.
+                    assert!((u.uv[1][k] - atlas.uv[*i][k]).length() < 1e-7);
+                }
+            }
+        }
+        // The light map, named in every primitive's extras, decodes to its texels.
+        let (doc, _buffers, images) = gltf::import_slice(&bytes).expect("gltf");
+        let t = r.lightmap_texture.expect("a light map texture");
+        for mesh in doc.meshes() {
+            let p = mesh.primitives().next().expect("one primitive");
+            let extras: serde_json::Value =
+                serde_json::from_str(p.extras().as_ref().expect("extras").get()).expect("json");
+            assert_eq!(extras["lightmap"]["texture"], serde_json::json!(t));
+            assert_eq!(extras["lightmap"]["texCoord"], serde_json::json!(1));
+            assert_eq!(extras["lightmap"]["encoding"], "srgb");
+        }
+        let texture = doc.textures().nth(t).expect("texture");
+        let img = &images[texture.source().index()];
+        assert_eq!((img.width, img.height), (atlas.width, atlas.height));
+        let n = img.pixels.len() / (img.width * img.height) as usize;
+        for (i, want) in texels.iter().enumerate().step_by(97) {
+            for c in 0..3 {
+                let byte = img.pixels[i * n + c];
+                let got = r.lightmap_scale as f64
+                    * radiant_color::srgb_to_linear(f64::from(byte) / 255.0);
+                let tol = r.lightmap_scale as f64 * 0.01 + 1e-3;
+                assert!(
+                    (got - f64::from(want[c])).abs() < tol,
+                    "texel {i}: {got} vs {want:?}"
+                );
+            }
+        }
+        // A name other engines would not read as binary glTF is refused.
+        assert!(matches!(
+            export_gltf(&scene, None, &dir.join("cornell.gltf")),
+            Err(SceneError::Export(_))
+        ));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
