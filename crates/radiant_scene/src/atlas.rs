@@ -1,7 +1,10 @@
-//! The light-map atlas of a scene: one chart per triangle (a `cell × cell` texel square holding
-//! the triangle's three corners, inset one texel so bilinear filtering stays inside), a
-//! surface's charts one block, blocks packed on shelves. The CLI's light map and the
-//! renderer's are this one atlas; `rasterize` fills either, dilating each chart by one texel.
+//! The light-map atlas of a scene. Where every triangle has an authored TEXCOORD_1 inside the
+//! unit square and no two triangles overlap in it, those coordinates are used unchanged, on a
+//! square map of as many texels as the generated layout would have. Otherwise the atlas is
+//! generated: one chart per triangle (a `cell × cell` texel square holding the triangle's three
+//! corners, inset one texel so bilinear filtering stays inside), a surface's charts one block,
+//! blocks packed on shelves. The CLI's light map and the renderer's are this one atlas;
+//! `rasterize` fills either, dilating each chart by one texel where no other chart is.
 
 use glam::{DVec3, Vec2};
 
@@ -69,12 +72,14 @@ pub struct Atlas {
     pub width: u32,
     /// Height in texels.
     pub height: u32,
-    /// Texels along a chart's side.
+    /// Texels along a chart's side (generated atlases; the generated layout's for authored).
     pub cell: u32,
-    /// Per surface, its block.
+    /// Per surface, its block (generated atlases; empty blocks for authored ones).
     pub blocks: Vec<Block>,
     /// Per triangle, the light-map coordinates of its three vertices, in [0, 1].
     pub uv: Vec<[Vec2; 3]>,
+    /// Whether `uv` is the scene's own TEXCOORD_1.
+    pub authored: bool,
 }
 
 /// An atlas too large even at 4 texels per chart: its size in texels.
@@ -87,9 +92,59 @@ pub struct TooLarge {
 }
 
 impl Atlas {
-    /// The atlas of `scene` with `cell` texels per chart side (4 to 256), smaller where the
-    /// atlas would pass [`MAX_TEXELS`] (not below 4).
+    /// The atlas of `scene`: its authored TEXCOORD_1 where usable (see the module), else
+    /// generated with `cell` texels per chart side (4 to 256), smaller where the atlas would
+    /// pass [`MAX_TEXELS`] (not below 4).
     pub fn new(scene: &Scene, cell: u32) -> Result<Atlas, TooLarge> {
+        let generated = Self::generated(scene, cell)?;
+        Ok(Self::authored(scene, &generated).unwrap_or(generated))
+    }
+
+    /// The scene's own TEXCOORD_1, if every triangle has one in the unit square and no texel
+    /// centre of a `side²` map lies inside two triangles.
+    fn authored(scene: &Scene, generated: &Atlas) -> Option<Atlas> {
+        let has = |t: &crate::Triangle| {
+            scene
+                .surfaces
+                .get(t.surface as usize)
+                .is_some_and(|s| s.tex_coords >= 2)
+                && t.uv[1].iter().all(|c| {
+                    c.is_finite() && (0.0..=1.0).contains(&c.x) && (0.0..=1.0).contains(&c.y)
+                })
+        };
+        if scene.triangles.is_empty() || !scene.triangles.iter().all(has) {
+            return None;
+        }
+        let texels = f64::from(generated.width) * f64::from(generated.height);
+        let side = ((texels.sqrt().ceil() as u32).div_ceil(4) * 4).clamp(64, MAX_SIDE);
+        let mut owner = vec![u32::MAX; side as usize * side as usize];
+        let mut overlap = false;
+        for_inside_texels(
+            side,
+            side,
+            scene.triangles.iter().map(|t| t.uv[1]),
+            |i, x, y| {
+                let o = &mut owner[(y * side + x) as usize];
+                if *o != u32::MAX && *o != i as u32 {
+                    overlap = true;
+                }
+                *o = i as u32;
+            },
+        );
+        if overlap {
+            return None;
+        }
+        Some(Atlas {
+            width: side,
+            height: side,
+            cell: generated.cell,
+            blocks: vec![Block::default(); scene.surfaces.len()],
+            uv: scene.triangles.iter().map(|t| t.uv[1]).collect(),
+            authored: true,
+        })
+    }
+
+    fn generated(scene: &Scene, cell: u32) -> Result<Atlas, TooLarge> {
         let mut count = vec![0usize; scene.surfaces.len()];
         let mut slot = Vec::with_capacity(scene.triangles.len());
         for t in &scene.triangles {
@@ -142,19 +197,18 @@ impl Atlas {
             cell,
             blocks,
             uv,
+            authored: false,
         })
     }
 
     /// Texels per scene unit along a surface, area-weighted over `scene`'s triangles (each
-    /// chart's texels inside its triangle over the triangle's area, square-rooted).
+    /// triangle's texels over its area, square-rooted).
     pub fn texel_density(&self, scene: &Scene) -> f64 {
-        let inside = {
-            let s = self.cell as f64 - 3.0;
-            0.5 * s * s
-        };
+        let texels = f64::from(self.width) * f64::from(self.height);
         let (mut sum, mut area) = (0.0, 0.0);
-        for t in &scene.triangles {
+        for (t, uv) in scene.triangles.iter().zip(&self.uv) {
             let a = t.area();
+            let inside = uv_area(uv) * texels;
             if a > 0.0 && a.is_finite() {
                 sum += a * (inside / a).sqrt();
                 area += a;
@@ -163,22 +217,58 @@ impl Atlas {
         if area > 0.0 { sum / area } else { 0.0 }
     }
 
-    /// The share of texels inside some chart's triangle.
+    /// The share of texels inside some triangle (charts do not overlap).
     pub fn utilisation(&self) -> f64 {
-        let per_chart = {
-            let s = self.cell as f64 - 3.0;
-            0.5 * s * s
-        };
-        (self.uv.len() as f64 * per_chart / (f64::from(self.width) * f64::from(self.height)))
-            .min(1.0)
+        self.uv.iter().map(uv_area).sum::<f64>().min(1.0)
     }
 }
 
-/// Fills `texels` (`width × height`, row-major) chart by chart: `charts` yields each triangle's
-/// index, its light-map coordinates and its three positions; every texel of the chart's box and
-/// one around it gets `eval(triangle, u, v, position)` at the texel centre's barycentric
-/// weights clamped onto the triangle, so the ring around a chart repeats its edge and bilinear
-/// filtering never reads outside it.
+/// A chart's area in the unit square.
+fn uv_area(uv: &[Vec2; 3]) -> f64 {
+    0.5 * f64::from((uv[1] - uv[0]).perp_dot(uv[2] - uv[0]).abs())
+}
+
+/// Calls `f(chart, x, y)` for every texel whose centre lies strictly inside a chart (by a
+/// thousandth of its barycentric range: a texel on an edge two charts share is neither's).
+fn for_inside_texels(
+    width: u32,
+    height: u32,
+    charts: impl Iterator<Item = [Vec2; 3]>,
+    mut f: impl FnMut(usize, u32, u32),
+) {
+    let size = Vec2::new(width as f32, height as f32);
+    for (index, uv) in charts.enumerate() {
+        let uv = uv.map(|c| c * size);
+        let (e1, e2) = (uv[1] - uv[0], uv[2] - uv[0]);
+        let det = e1.perp_dot(e2);
+        let (lo, hi) = (uv[0].min(uv[1]).min(uv[2]), uv[0].max(uv[1]).max(uv[2]));
+        if det.abs() < 1e-12 || !(lo.is_finite() && hi.is_finite()) {
+            continue;
+        }
+        let eps = -1e-3;
+        let x0 = (lo.x - 0.5).floor().max(0.0) as u32;
+        let y0 = (lo.y - 0.5).floor().max(0.0) as u32;
+        let x1 = ((hi.x + 0.5).ceil().max(0.0) as u32).min(width);
+        let y1 = ((hi.y + 0.5).ceil().max(0.0) as u32).min(height);
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let q = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) - uv[0];
+                let u = q.perp_dot(e2) / det;
+                let v = e1.perp_dot(q) / det;
+                if u >= -eps && v >= -eps && u + v <= 1.0 + eps {
+                    f(index, x, y);
+                }
+            }
+        }
+    }
+}
+
+/// Fills `texels` (`width × height`, row-major): `charts` yields each triangle's index, its
+/// light-map coordinates and its three positions. First every texel whose centre is inside a
+/// chart gets `eval(triangle, u, v, position)` at its barycentric weights; then each chart's
+/// box and one texel around it, where no chart is, gets the value at the weights clamped onto
+/// the triangle, so bilinear filtering never reads unfilled texels and a chart's ring never
+/// overwrites a neighbouring chart.
 pub fn rasterize(
     width: u32,
     height: u32,
@@ -189,25 +279,36 @@ pub fn rasterize(
     if texels.len() as u64 != u64::from(width) * u64::from(height) {
         return;
     }
+    let charts: Vec<(usize, [Vec2; 3], [DVec3; 3])> = charts.collect();
+    let mut covered = vec![false; texels.len()];
     let (w, h) = (width as f32, height as f32);
-    for (index, uv, p) in charts {
-        let uv = uv.map(|c| c * Vec2::new(w, h));
-        let lo = uv[0].min(uv[1]).min(uv[2]).floor() - 1.0;
-        let hi = uv[0].max(uv[1]).max(uv[2]).ceil() + 1.0;
-        let (e1, e2) = (uv[1] - uv[0], uv[2] - uv[0]);
-        let det = e1.perp_dot(e2);
-        if det.abs() < 1e-12 || !(lo.is_finite() && hi.is_finite()) {
-            continue;
-        }
-        for y in lo.y.max(0.0) as u32..(hi.y.max(0.0) as u32).min(height) {
-            for x in lo.x.max(0.0) as u32..(hi.x.max(0.0) as u32).min(width) {
-                let q = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) - uv[0];
-                // Barycentrics, clamped onto the triangle so the border texels dilate it.
-                let u = (q.perp_dot(e2) / det).clamp(0.0, 1.0);
-                let v = (e1.perp_dot(q) / det).clamp(0.0, 1.0 - u);
-                let (u64_, v64) = (f64::from(u), f64::from(v));
-                let pos = p[0] + (p[1] - p[0]) * u64_ + (p[2] - p[0]) * v64;
-                texels[(y * width + x) as usize] = eval(index, u, v, pos);
+    for pass in 0..2 {
+        for &(index, uv, p) in &charts {
+            let uv = uv.map(|c| c * Vec2::new(w, h));
+            let lo = uv[0].min(uv[1]).min(uv[2]).floor() - 1.0;
+            let hi = uv[0].max(uv[1]).max(uv[2]).ceil() + 1.0;
+            let (e1, e2) = (uv[1] - uv[0], uv[2] - uv[0]);
+            let det = e1.perp_dot(e2);
+            if det.abs() < 1e-12 || !(lo.is_finite() && hi.is_finite()) {
+                continue;
+            }
+            for y in lo.y.max(0.0) as u32..(hi.y.max(0.0) as u32).min(height) {
+                for x in lo.x.max(0.0) as u32..(hi.x.max(0.0) as u32).min(width) {
+                    let i = (y * width + x) as usize;
+                    let q = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) - uv[0];
+                    let (u, v) = (q.perp_dot(e2) / det, e1.perp_dot(q) / det);
+                    let eps = 1e-4;
+                    let inside = u >= -eps && v >= -eps && u + v <= 1.0 + eps;
+                    if (pass == 0) != inside || (pass == 1 && covered[i]) {
+                        continue;
+                    }
+                    // Barycentrics, clamped onto the triangle for the ring around it.
+                    let u = u.clamp(0.0, 1.0);
+                    let v = v.clamp(0.0, 1.0 - u);
+                    let pos = p[0] + (p[1] - p[0]) * f64::from(u) + (p[2] - p[0]) * f64::from(v);
+                    texels[i] = eval(index, u, v, pos);
+                    covered[i] = true;
+                }
             }
         }
     }
@@ -260,6 +361,63 @@ mod tests {
             assert!(cells.insert(cell), "two charts in cell {cell:?}");
         }
         assert!(atlas.utilisation() > 0.2, "{}", atlas.utilisation());
+    }
+
+    #[test]
+    fn authored_texcoord_1_is_used_unchanged_unless_triangles_overlap_in_it() {
+        let mut scene = Scene::default();
+        scene.surfaces.push(crate::Surface {
+            tex_coords: 2,
+            ..Default::default()
+        });
+        // Two triangles of a quad, side by side in their own UV1, sharing an edge.
+        let mut a = crate::Triangle::new([DVec3::ZERO, DVec3::X, DVec3::Y], 0);
+        let mut b = crate::Triangle::new([DVec3::X, DVec3::X + DVec3::Y, DVec3::Y], 0);
+        a.uv[1] = [
+            Vec2::new(0.1, 0.1),
+            Vec2::new(0.9, 0.1),
+            Vec2::new(0.1, 0.9),
+        ];
+        b.uv[1] = [
+            Vec2::new(0.9, 0.1),
+            Vec2::new(0.9, 0.9),
+            Vec2::new(0.1, 0.9),
+        ];
+        scene.triangles = vec![a, b];
+        let atlas = Atlas::new(&scene, 32).expect("atlas");
+        assert!(atlas.authored);
+        assert_eq!(atlas.uv, vec![a.uv[1], b.uv[1]]);
+        // Filled, each texel inside a chart holds its own triangle; the ring of one chart does
+        // not overwrite the other.
+        let mut texels = vec![[-1.0f32; 3]; (atlas.width * atlas.height) as usize];
+        let charts = scene
+            .triangles
+            .iter()
+            .zip(&atlas.uv)
+            .enumerate()
+            .map(|(i, (t, uv))| (i, *uv, t.vertices));
+        rasterize(
+            atlas.width,
+            atlas.height,
+            &mut texels,
+            charts,
+            |i, _, _, _| [i as f32; 3],
+        );
+        let side = atlas.width as f32;
+        let at = |u: f32, v: f32| {
+            texels[((v * side) as u32 * atlas.width + (u * side) as u32) as usize][0]
+        };
+        assert_eq!(at(0.3, 0.3), 0.0);
+        assert_eq!(at(0.7, 0.7), 1.0);
+        assert_eq!(at(0.02, 0.02), -1.0, "far outside every chart");
+        // The same UV1 on both triangles overlaps: the atlas is generated instead.
+        scene.triangles[1].uv[1] = a.uv[1];
+        let generated = Atlas::new(&scene, 32).expect("atlas");
+        assert!(!generated.authored);
+        // Without a second UV set on every surface, too.
+        scene.triangles[1].uv[1] = b.uv[1];
+        scene.surfaces[0].tex_coords = 1;
+        assert!(!Atlas::new(&scene, 32).expect("atlas").authored);
     }
 
     #[test]
