@@ -175,7 +175,21 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     // Informational: a failure is a warning, not a failed bake.
     let rgb_points = if cornell {
         metrics::parse_point_csv(CORNELL_POINTS_RGB, 1e-3)
-            .and_then(|refs| metrics::compare_points(&result.mesh, &result.radiosity, &refs, None))
+            .and_then(|refs| {
+                let elements =
+                    metrics::compare_points(&result.mesh, &result.radiosity, &refs, None)?;
+                // The smooth field the light map is filled from, at the same points.
+                let field = radiant::radiosity::smooth::SmoothField::new(
+                    &result.mesh,
+                    &result.system,
+                    &scene.surfaces,
+                    &result.radiosity,
+                );
+                let smooth = metrics::compare_points_with(&refs, None, |r| {
+                    field.radiosity_at(&result.mesh, r.position, r.normal)
+                })?;
+                Ok((elements, smooth))
+            })
             .map_err(|e| println!("warning: no point comparison: {e}"))
             .ok()
     } else {
@@ -334,8 +348,9 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     if !spectral_json.is_null() {
         report["spectral"] = spectral_json;
     }
-    if let Some(c) = &rgb_points {
+    if let Some((c, smooth)) = &rgb_points {
         report["points_vs_path_traced"] = points_json(c);
+        report["points_vs_path_traced"]["smooth"] = points_json(smooth);
     }
     write_atomic(
         &out.join("report.json"),
@@ -367,12 +382,14 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     for w in &r.warnings {
         println!("warning: {w}");
     }
-    if let Some(c) = &rgb_points {
+    if let Some((c, smooth)) = &rgb_points {
         println!(
-            "RGB bake vs Mitsuba 3 RGB path tracing at {} surface points: mean {:.2} %, max {:.2} %",
+            "RGB bake vs Mitsuba 3 RGB path tracing at {} surface points: mean {:.2} %, max {:.2} % (elements); {:.2} %, {:.2} % (the light map's smooth field)",
             c.points.len(),
             c.mean_rel * 100.0,
-            c.max_rel * 100.0
+            c.max_rel * 100.0,
+            smooth.mean_rel * 100.0,
+            smooth.max_rel * 100.0
         );
     }
     if let Some((name, e)) = &error {

@@ -293,6 +293,7 @@ fn spectral_bake_compares_with_rgb() {
     // The builtin box is compared with path tracing at surface points too, RGB and spectral.
     for key in [
         &report["points_vs_path_traced"],
+        &report["points_vs_path_traced"]["smooth"],
         &report["spectral"]["vs_path_traced_points"],
     ] {
         let mean = key["mean_rel"].as_f64().expect("mean_rel");

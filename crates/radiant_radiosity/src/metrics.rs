@@ -344,10 +344,20 @@ pub fn compare_points(
     reference: &[PointReference],
     normalise_to: Option<&str>,
 ) -> Result<PointComparison, BakeError> {
+    compare_points_with(reference, normalise_to, |r| {
+        element_at(mesh, r.position, r.normal).and_then(|e| radiosity.get(e).copied())
+    })
+}
+
+/// [`compare_points`] with our radiosity at a point from `at` (`None`: no surface there),
+/// e.g. the smooth field's (`crate::smooth::SmoothField::radiosity_at`).
+pub fn compare_points_with(
+    reference: &[PointReference],
+    normalise_to: Option<&str>,
+    at: impl Fn(&PointReference) -> Option<Rgb>,
+) -> Result<PointComparison, BakeError> {
     let at = |r: &PointReference| -> Result<Rgb, BakeError> {
-        element_at(mesh, r.position, r.normal)
-            .and_then(|e| radiosity.get(e).copied())
-            .ok_or_else(|| BakeError::Reference(format!("no element at point '{}'", r.name)))
+        at(r).ok_or_else(|| BakeError::Reference(format!("no element at point '{}'", r.name)))
     };
     let scale = match normalise_to {
         Some(name) => {
