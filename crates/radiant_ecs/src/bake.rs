@@ -290,8 +290,8 @@ enum Outcome {
     Failed(String),
     /// A level's clustered bake finished at this epoch; it keeps nothing to edit.
     Finished(u64),
-    /// A level's clustered bake stopped for a pause (`true`) and must start over to resume.
-    Stopped(bool),
+    /// A level's clustered bake stopped for a pause; it starts over when resumed.
+    PausedLevel,
 }
 
 enum Start {
@@ -659,7 +659,7 @@ fn work_clustered(
         }
         Err(radiant_radiosity::BakeError::Stopped) => match reason.lock().ok().and_then(|g| *g) {
             Some(StopReason::Edit) => Outcome::NeedsRebuild,
-            Some(StopReason::Pause) => Outcome::Stopped(true),
+            Some(StopReason::Pause) => Outcome::PausedLevel,
             Some(StopReason::Cancel) | None => Outcome::Cancelled,
         },
         Err(e) => Outcome::Failed(e.to_string()),
@@ -944,12 +944,10 @@ pub fn drive_bake(world: &mut World) {
                     world.resource_mut::<BakeWorker>().rebuild = Some(scene);
                 }
             }
-            Outcome::Stopped(paused) => {
+            Outcome::PausedLevel => {
                 let scene = Arc::new(gather_scene(world));
                 world.resource_mut::<BakeWorker>().rebuild = Some(scene);
-                if paused {
-                    world.resource_mut::<BakeStatus>().phase = BakePhase::Paused;
-                }
+                world.resource_mut::<BakeStatus>().phase = BakePhase::Paused;
             }
             Outcome::NeedsRebuild => {
                 let scene = Arc::new(gather_scene(world));
