@@ -85,7 +85,7 @@ fn sample(lm: &radiant::render::scene::LightMap, uv: [f32; 2]) -> [f64; 3] {
 
 #[test]
 fn cornell_light_map_texels_match_mitsuba_and_agree_across_shared_edges() {
-    use radiant::radiosity::metrics::{CORNELL_POINTS_RGB, parse_point_csv};
+    use radiant::radiosity::metrics::{CORNELL_POINTS_RGB, compare_points_with, parse_point_csv};
     let scene = radiant::scene::builtin("cornell-box").expect("builtin");
     let bake = Bake::new(&scene, &BakeParams::default())
         .expect("bake")
@@ -105,19 +105,16 @@ fn cornell_light_map_texels_match_mitsuba_and_agree_across_shared_edges() {
     let pos = |t: usize, k: usize| rs.origin + glam::Vec3::from(vert(t, k).position).as_dvec3();
     // At the 24 path-traced points: the texel value as the renderer reads it (albedo × H + E).
     let refs = parse_point_csv(CORNELL_POINTS_RGB, 1e-3).expect("points");
-    let (mut mean, mut max) = (0.0f64, 0.0f64);
-    for p in &refs {
-        let (t, w) = (0..scene.triangles.len())
-            .find_map(|t| {
-                let tri = &scene.triangles[t];
-                let n = tri.cross().normalize();
-                if n.dot(p.normal) < 0.99 || (p.position - tri.vertices[0]).dot(n).abs() > 5e-3 {
-                    return None;
-                }
-                let w = radiant::scene::texture::barycentric(tri.vertices, p.position);
-                w.iter().all(|&x| x >= -1e-9).then_some((t, w))
-            })
-            .unwrap_or_else(|| panic!("{} is on no triangle", p.name));
+    let c = compare_points_with(&refs, None, |p| {
+        let (t, w) = (0..scene.triangles.len()).find_map(|t| {
+            let tri = &scene.triangles[t];
+            let n = tri.cross().normalize();
+            if n.dot(p.normal) < 0.99 || (p.position - tri.vertices[0]).dot(n).abs() > 5e-3 {
+                return None;
+            }
+            let w = radiant::scene::texture::barycentric(tri.vertices, p.position);
+            w.iter().all(|&x| x >= -1e-9).then_some((t, w))
+        })?;
         let uv: [f32; 2] = std::array::from_fn(|a| {
             (0..3)
                 .map(|k| w[k] as f32 * vert(t, k).lightmap_uv[a])
@@ -125,18 +122,13 @@ fn cornell_light_map_texels_match_mitsuba_and_agree_across_shared_edges() {
         });
         let hh = sample(lm, uv);
         let v = vert(t, 0);
-        let ours: [f64; 3] = std::array::from_fn(|c| {
+        Some(std::array::from_fn(|c| {
             let albedo = (f64::from(v.albedo[c]) * 255.0).round() / 255.0;
             f64::from(v.emissive[c]) + albedo * hh[c]
-        });
-        let sum: f64 = p.radiosity.iter().sum();
-        let rel = (0..3)
-            .map(|c| (ours[c] - p.radiosity[c]).abs())
-            .sum::<f64>()
-            / sum;
-        mean += rel / refs.len() as f64;
-        max = max.max(rel);
-    }
+        }))
+    })
+    .expect("every point on a triangle");
+    let (mean, max) = (c.mean_rel, c.max_rel);
     eprintln!(
         "light-map texels at the 24 points: mean {:.2} %, max {:.2} %",
         mean * 100.0,

@@ -83,6 +83,29 @@ fn snapshot(h: &mut Harness<'_, State>, name: &str) {
     );
 }
 
+/// Clicks into the `nth` text field labelled "sRGB", selects all and types `text`, like a
+/// user would.
+fn type_hex(h: &mut Harness<'_, State>, nth: usize, text: &str) {
+    let field = |h: &Harness<'_, State>| {
+        h.get_all_by_role_and_label(egui::accesskit::Role::TextInput, "sRGB")
+            .nth(nth)
+            .expect("an sRGB hex field")
+            .rect()
+    };
+    let r = field(h);
+    h.hover_at(r.center());
+    h.drag_at(r.center());
+    h.drop_at(r.center());
+    h.run();
+    h.key_combination_modifiers(egui::Modifiers::COMMAND, &[egui::Key::A]);
+    h.run();
+    h.get_all_by_role_and_label(egui::accesskit::Role::TextInput, "sRGB")
+        .nth(nth)
+        .expect("an sRGB hex field")
+        .type_text(text);
+    h.run();
+}
+
 /// Drags the handle of the slider labelled `label` by `dx` points, like a mouse would.
 fn drag_slider(h: &mut Harness<'_, State>, label: &str, dx: f32) {
     let rect = h
@@ -109,29 +132,12 @@ fn colour_panel_edits_the_material() {
 
     // Type a new sRGB hex code into the base colour's field (the first "sRGB" text input).
     let hex = radiant_inspector::colour::to_hex(before.reflectance);
-    let base_field = |h: &Harness<'_, State>| {
-        h.get_all_by_role_and_label(egui::accesskit::Role::TextInput, "sRGB")
-            .next()
-            .expect("the base colour's hex field")
-            .rect()
-    };
     let field = h
         .get_all_by_role_and_label(egui::accesskit::Role::TextInput, "sRGB")
         .next()
         .expect("hex field");
     assert_eq!(field.value().as_deref(), Some(hex.as_str()));
-    let r = base_field(&h);
-    h.hover_at(r.center());
-    h.drag_at(r.center());
-    h.drop_at(r.center());
-    h.run();
-    h.key_combination_modifiers(egui::Modifiers::COMMAND, &[egui::Key::A]);
-    h.run();
-    h.get_all_by_role_and_label(egui::accesskit::Role::TextInput, "sRGB")
-        .next()
-        .expect("hex field")
-        .type_text("#336699");
-    h.run();
+    type_hex(&mut h, 0, "#336699");
     let after = *h.state().world.get::<Material>(entity).expect("material");
     let want = radiant_inspector::colour::from_hex("#336699").expect("hex");
     for c in 0..3 {
@@ -230,24 +236,7 @@ fn sky_panel_switches_kinds_and_edits_the_sky_resource() {
         })
     );
     // The horizon's sRGB hex field, typed as a user would.
-    let horizon_field = |h: &Harness<'_, State>| {
-        h.get_all_by_role_and_label(egui::accesskit::Role::TextInput, "sRGB")
-            .nth(1)
-            .expect("the horizon's hex field")
-            .rect()
-    };
-    let r = horizon_field(&h);
-    h.hover_at(r.center());
-    h.drag_at(r.center());
-    h.drop_at(r.center());
-    h.run();
-    h.key_combination_modifiers(egui::Modifiers::COMMAND, &[egui::Key::A]);
-    h.run();
-    h.get_all_by_role_and_label(egui::accesskit::Role::TextInput, "sRGB")
-        .nth(1)
-        .expect("the horizon's hex field")
-        .type_text("#ffffff");
-    h.run();
+    type_hex(&mut h, 1, "#ffffff");
     let Some(Sky::Gradient { zenith, horizon }) = h.state().world.resource::<SceneSky>().0.clone()
     else {
         panic!("still a gradient");

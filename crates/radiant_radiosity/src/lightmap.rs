@@ -5,7 +5,7 @@
 //! Triangles left out of the bake (dynamic surfaces) stay 0.
 
 use radiant_scene::Scene;
-use radiant_scene::atlas::{Atlas, rasterize};
+use radiant_scene::atlas::Atlas;
 
 use crate::mesh::Mesh;
 use crate::smooth::SmoothField;
@@ -44,25 +44,12 @@ pub fn static_roots(scene: &Scene) -> Vec<Option<u32>> {
 /// Fills `atlas` with the bake's `H` from `field` (on `mesh`, the bake of `scene`'s static part).
 pub fn bake_lightmap(scene: &Scene, atlas: &Atlas, mesh: &Mesh, field: &SmoothField) -> LightMap {
     let roots = static_roots(scene);
-    let mut texels = vec![[0.0f32; 3]; atlas.width as usize * atlas.height as usize];
-    let charts = scene
-        .triangles
-        .iter()
-        .zip(&atlas.uv)
-        .enumerate()
-        .map(|(i, (t, uv))| (i, *uv, t.vertices));
-    rasterize(
-        atlas.width,
-        atlas.height,
-        &mut texels,
-        charts,
-        |i, u, v, _| match roots.get(i).copied().flatten() {
-            Some(root) if (root as usize) < mesh.roots.len() => field
-                .irradiance(mesh, root, f64::from(u), f64::from(v))
-                .map(|x| x as f32),
-            _ => [0.0; 3],
-        },
-    );
+    let texels = atlas.fill(scene, |i, u, v, _| match roots.get(i).copied().flatten() {
+        Some(root) if (root as usize) < mesh.roots.len() => field
+            .irradiance(mesh, root, f64::from(u), f64::from(v))
+            .map(|x| x as f32),
+        _ => [0.0; 3],
+    });
     LightMap {
         width: atlas.width,
         height: atlas.height,

@@ -10,7 +10,8 @@ mod common;
 
 use radiant_radiosity::BakeParams;
 use radiant_radiosity::metrics::{
-    CORNELL_POINTS_RGB, CORNELL_POINTS_SPECTRAL, compare_points, element_at, parse_point_csv,
+    CORNELL_POINTS_RGB, CORNELL_POINTS_SPECTRAL, compare_points, compare_points_with, element_at,
+    parse_point_csv,
 };
 use radiant_radiosity::spectral::solve_spectral;
 
@@ -114,19 +115,11 @@ fn the_smooth_field_is_closer_to_the_path_tracer_at_the_points_than_the_elements
     let r = common::bake(&scene, &BakeParams::default());
     let refs = parse_point_csv(CORNELL_POINTS_RGB, 1e-3).expect("rgb points");
     let field = SmoothField::new(&r.mesh, &r.system, &scene.surfaces, &r.radiosity);
-    let (mut mean, mut max) = (0.0f64, 0.0f64);
-    for p in &refs {
-        let ours = field
-            .radiosity_at(&r.mesh, p.position, p.normal)
-            .expect("on an element");
-        let sum: f64 = p.radiosity.iter().sum();
-        let rel = (0..3)
-            .map(|c| (ours[c] - p.radiosity[c]).abs())
-            .sum::<f64>()
-            / sum;
-        mean += rel / refs.len() as f64;
-        max = max.max(rel);
-    }
+    let smooth = compare_points_with(&refs, None, |p| {
+        field.radiosity_at(&r.mesh, p.position, p.normal)
+    })
+    .expect("compare");
+    let (mean, max) = (smooth.mean_rel, smooth.max_rel);
     eprintln!(
         "smooth field at 24 points: mean {:.2} %, max {:.2} %",
         mean * 100.0,

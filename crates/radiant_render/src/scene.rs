@@ -853,25 +853,7 @@ impl GpuScene {
             Some(_) => return Err(RenderError::NonFinite("light map size")),
             None => (1, 1, vec![0; 4]),
         };
-        let tex = dev.create_texture_with_data(
-            &gpu.queue,
-            &wgpu::TextureDescriptor {
-                label: Some("scene_lightmap"),
-                size: wgpu::Extent3d {
-                    width: lw,
-                    height: lh,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Rgba16Float,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            },
-            wgpu::util::TextureDataOrder::LayerMajor,
-            bytemuck::cast_slice(&data),
-        );
+        let lightmap = rgba16f_texture(gpu, "scene_lightmap", lw, lh, &data);
         let linear_sampler = dev.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("linear_clamp"),
             mag_filter: wgpu::FilterMode::Linear,
@@ -893,7 +875,7 @@ impl GpuScene {
             sky_image,
             lights,
             light_count,
-            lightmap: tex.create_view(&wgpu::TextureViewDescriptor::default()),
+            lightmap,
             linear_sampler,
             camera,
             origin: scene.origin,
@@ -979,26 +961,38 @@ fn upload_sky(
             contents: bytemuck::bytes_of(&u),
             usage: wgpu::BufferUsages::UNIFORM,
         });
-    let tex = gpu.device.create_texture_with_data(
-        &gpu.queue,
-        &wgpu::TextureDescriptor {
-            label: Some("scene_sky_image"),
-            size: wgpu::Extent3d {
-                width: w,
-                height: h,
-                depth_or_array_layers: 1,
+    Ok((buffer, rgba16f_texture(gpu, "scene_sky_image", w, h, &data)))
+}
+
+/// A sampled `width × height` Rgba16Float texture from f16 bits, RGBA per texel.
+fn rgba16f_texture(
+    gpu: &crate::GpuContext,
+    label: &str,
+    width: u32,
+    height: u32,
+    data: &[u16],
+) -> wgpu::TextureView {
+    gpu.device
+        .create_texture_with_data(
+            &gpu.queue,
+            &wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba16Float,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
             },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba16Float,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            view_formats: &[],
-        },
-        wgpu::util::TextureDataOrder::LayerMajor,
-        bytemuck::cast_slice(&data),
-    );
-    Ok((buffer, tex.create_view(&Default::default())))
+            wgpu::util::TextureDataOrder::LayerMajor,
+            bytemuck::cast_slice(data),
+        )
+        .create_view(&Default::default())
 }
 
 use bytemuck::Zeroable as _;

@@ -217,6 +217,24 @@ impl Atlas {
         if area > 0.0 { sum / area } else { 0.0 }
     }
 
+    /// The light map of `scene` on this atlas: every chart's texels (and a one-texel ring where
+    /// no chart is, see [`rasterize`]) get `eval(triangle, u, v, position)`; the rest are 0.
+    pub fn fill(
+        &self,
+        scene: &Scene,
+        eval: impl FnMut(usize, f32, f32, DVec3) -> [f32; 3],
+    ) -> Vec<[f32; 3]> {
+        let mut texels = vec![[0.0f32; 3]; self.width as usize * self.height as usize];
+        let charts = scene
+            .triangles
+            .iter()
+            .zip(&self.uv)
+            .enumerate()
+            .map(|(i, (t, uv))| (i, *uv, t.vertices));
+        rasterize(self.width, self.height, &mut texels, charts, eval);
+        texels
+    }
+
     /// The share of texels inside some triangle (charts do not overlap).
     pub fn utilisation(&self) -> f64 {
         self.uv.iter().map(uv_area).sum::<f64>().min(1.0)
@@ -389,27 +407,14 @@ mod tests {
         assert_eq!(atlas.uv, vec![a.uv[1], b.uv[1]]);
         // Filled, each texel inside a chart holds its own triangle; the ring of one chart does
         // not overwrite the other.
-        let mut texels = vec![[-1.0f32; 3]; (atlas.width * atlas.height) as usize];
-        let charts = scene
-            .triangles
-            .iter()
-            .zip(&atlas.uv)
-            .enumerate()
-            .map(|(i, (t, uv))| (i, *uv, t.vertices));
-        rasterize(
-            atlas.width,
-            atlas.height,
-            &mut texels,
-            charts,
-            |i, _, _, _| [i as f32; 3],
-        );
+        let texels = atlas.fill(&scene, |i, _, _, _| [i as f32 + 1.0; 3]);
         let side = atlas.width as f32;
         let at = |u: f32, v: f32| {
             texels[((v * side) as u32 * atlas.width + (u * side) as u32) as usize][0]
         };
-        assert_eq!(at(0.3, 0.3), 0.0);
-        assert_eq!(at(0.7, 0.7), 1.0);
-        assert_eq!(at(0.02, 0.02), -1.0, "far outside every chart");
+        assert_eq!(at(0.3, 0.3), 1.0);
+        assert_eq!(at(0.7, 0.7), 2.0);
+        assert_eq!(at(0.02, 0.02), 0.0, "far outside every chart");
         // The same UV1 on both triangles overlaps: the atlas is generated instead.
         scene.triangles[1].uv[1] = a.uv[1];
         let generated = Atlas::new(&scene, 32).expect("atlas");
