@@ -264,15 +264,13 @@ fn build_scene(
         fill_lightmap(&mut rs, &scene, mesh, field);
         lit_by_bake(&mut rs);
     }
-    let atlas = radiant_scene::atlas::Atlas::new(&scene, settings.lightmap_cell)
-        .ok()
-        .map(|a| AtlasReport {
-            width: a.width,
-            height: a.height,
-            cell: a.cell,
-            utilisation: a.utilisation(),
-            texel_density: a.texel_density(&scene),
-        });
+    let atlas = rs.atlas.as_ref().map(|a| AtlasReport {
+        width: a.width,
+        height: a.height,
+        cell: a.cell,
+        utilisation: a.utilisation(),
+        texel_density: a.texel_density(&scene),
+    });
     let mut state = world.resource_mut::<RenderState>();
     state.scene = Some(Arc::new(scene));
     state.atlas = atlas;

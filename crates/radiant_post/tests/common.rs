@@ -142,6 +142,7 @@ pub fn scene(vertices: Vec<Vertex>, eye: Vec3, at: Vec3, h: f32) -> RenderScene 
         draws: Vec::new(),
         instances: Vec::new(),
         sky: None,
+        atlas: None,
         lights: Vec::new(),
         camera: CameraView {
             position: eye.as_dvec3(),

@@ -164,14 +164,7 @@ impl TextureCache {
     fn white(&mut self, device: &wgpu::Device, queue: &wgpu::Queue) -> wgpu::TextureView {
         self.white
             .get_or_insert_with(|| {
-                device
-                    .create_texture_with_data(
-                        queue,
-                        &texture_desc("white", 1, 1, 1),
-                        wgpu::util::TextureDataOrder::LayerMajor,
-                        &[255; 4],
-                    )
-                    .create_view(&Default::default())
+                crate::util::sampled_texture(device, queue, "white", (1, 1, 1), SRGB, &[255; 4])
             })
             .clone()
     }
@@ -200,13 +193,8 @@ impl TextureCache {
             .iter()
             .flat_map(|l| l.2.iter().copied())
             .collect();
-        let tex = device.create_texture_with_data(
-            queue,
-            &texture_desc(&t.name, w, h, (levels.len() - first) as u32),
-            wgpu::util::TextureDataOrder::LayerMajor,
-            &data,
-        );
-        let view = tex.create_view(&Default::default());
+        let mips = (levels.len() - first) as u32;
+        let view = crate::util::sampled_texture(device, queue, &t.name, (w, h, mips), SRGB, &data);
         self.uploads += 1;
         self.textures.insert(
             key,
@@ -299,22 +287,8 @@ impl TextureCache {
     }
 }
 
-fn texture_desc(label: &str, width: u32, height: u32, mips: u32) -> wgpu::TextureDescriptor<'_> {
-    wgpu::TextureDescriptor {
-        label: Some(label),
-        size: wgpu::Extent3d {
-            width,
-            height,
-            depth_or_array_layers: 1,
-        },
-        mip_level_count: mips,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: wgpu::TextureFormat::Rgba8UnormSrgb,
-        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        view_formats: &[],
-    }
-}
+/// Colour textures: 8-bit sRGB, decoded to linear by the sampler.
+const SRGB: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 
 /// The full mip chain of an sRGB RGBA8 image, down to 1 × 1: each level a 2 × 2 box filter of
 /// the one above in linear light (alpha averaged as is). Odd sides repeat their last texel.

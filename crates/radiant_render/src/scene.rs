@@ -164,6 +164,8 @@ pub struct RenderScene {
     pub instances: Vec<InstanceData>,
     /// What is seen where no geometry is (black without one).
     pub sky: Option<Sky>,
+    /// The light map's layout, when [`RenderScene::from_scene`] made it.
+    pub atlas: Option<radiant_scene::atlas::Atlas>,
     /// Punctual lights.
     pub lights: Vec<Light>,
     /// The camera.
@@ -406,6 +408,7 @@ impl RenderScene {
             draws,
             instances,
             sky: scene.sky.clone(),
+            atlas: Some(atlas),
             lights,
             camera,
             lightmap: Some(LightMap {
@@ -972,27 +975,14 @@ fn rgba16f_texture(
     height: u32,
     data: &[u16],
 ) -> wgpu::TextureView {
-    gpu.device
-        .create_texture_with_data(
-            &gpu.queue,
-            &wgpu::TextureDescriptor {
-                label: Some(label),
-                size: wgpu::Extent3d {
-                    width,
-                    height,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Rgba16Float,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            },
-            wgpu::util::TextureDataOrder::LayerMajor,
-            bytemuck::cast_slice(data),
-        )
-        .create_view(&Default::default())
+    crate::util::sampled_texture(
+        &gpu.device,
+        &gpu.queue,
+        label,
+        (width, height, 1),
+        wgpu::TextureFormat::Rgba16Float,
+        bytemuck::cast_slice(data),
+    )
 }
 
 use bytemuck::Zeroable as _;

@@ -155,6 +155,40 @@ pub fn buffer_entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry
     }
 }
 
+/// A sampled 2D texture of `format` with `mips` levels, filled from `data` (level after level,
+/// rows tightly packed); returns its view.
+pub fn sampled_texture(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    (width, height, mips): (u32, u32, u32),
+    format: wgpu::TextureFormat,
+    data: &[u8],
+) -> wgpu::TextureView {
+    use wgpu::util::DeviceExt as _;
+    device
+        .create_texture_with_data(
+            queue,
+            &wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: mips,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            data,
+        )
+        .create_view(&Default::default())
+}
+
 /// A 2D texture to render a frame into (and copy out of): mip 0 only, one sample.
 pub fn target_texture(
     device: &wgpu::Device,

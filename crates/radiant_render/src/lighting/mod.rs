@@ -156,27 +156,14 @@ impl LightingPipeline {
             compilation_options: Default::default(),
             cache: None,
         });
-        let white = device
-            .create_texture_with_data(
-                queue,
-                &wgpu::TextureDescriptor {
-                    label: Some("lighting_white"),
-                    size: wgpu::Extent3d {
-                        width: 1,
-                        height: 1,
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: wgpu::TextureFormat::R8Unorm,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                },
-                wgpu::util::TextureDataOrder::LayerMajor,
-                &[255],
-            )
-            .create_view(&Default::default());
+        let white = crate::util::sampled_texture(
+            device,
+            queue,
+            "lighting_white",
+            (1, 1, 1),
+            wgpu::TextureFormat::R8Unorm,
+            &[255],
+        );
         Self {
             layout,
             pipeline,
