@@ -33,9 +33,9 @@ struct Args {
     /// Image size, WxH.
     #[arg(long, default_value = "1280x720")]
     size: String,
-    /// Light map texels per triangle side.
-    #[arg(long, default_value_t = 32)]
-    lightmap_cell: u32,
+    /// Light-map texels per scene unit (default: automatic).
+    #[arg(long)]
+    texel_density: Option<f64>,
     /// Use a shadowless synthetic light map instead of baking.
     #[arg(long)]
     synthetic: bool,
@@ -99,15 +99,15 @@ fn main() -> anyhow::Result<()> {
     };
     let render_scene = if args.synthetic {
         let mut rs = if args.flatten {
-            RenderScene::from_scene_flattened(&scene, args.lightmap_cell)?
+            RenderScene::from_scene_flattened(&scene, args.texel_density)?
         } else {
-            RenderScene::from_scene(&scene, args.lightmap_cell)?
+            RenderScene::from_scene(&scene, args.texel_density)?
         };
         rs.fill_synthetic_lightmap(0.02);
         rs
     } else if !scene.has_emitters() {
         // Nothing to bake: direct light and emission only.
-        radiant::bridge::render_scene(&scene, None, args.lightmap_cell)?
+        radiant::bridge::render_scene(&scene, None, args.texel_density)?
     } else {
         let t = std::time::Instant::now();
         let bake = Bake::new(&scene, &BakeParams::default())?.run_to_end(&mut |_| {})?;
@@ -116,7 +116,7 @@ fn main() -> anyhow::Result<()> {
             bake.mesh.element_count(),
             t.elapsed().as_secs_f64()
         );
-        radiant::bridge::render_scene(&scene, Some(&bake), args.lightmap_cell)?
+        radiant::bridge::render_scene(&scene, Some(&bake), args.texel_density)?
     };
 
     let gpu = GpuContext::headless()?;

@@ -148,6 +148,19 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         anyhow::ensure!(known, "reference {name} names none of the scene's surfaces");
     }
     ensure_dir(&args.out)?;
+    // The light map's atlas first: a density it cannot use fails before the bake, not after.
+    let lap = Instant::now();
+    let atlas = radiant::scene::atlas::Atlas::new(&scene, args.texel_density)?;
+    let atlas_s = lap.elapsed().as_secs_f64();
+    println!(
+        "light-map atlas: {}×{} texels, {} charts, {:.1} texels/unit, {:.1} % inside charts ({:.2} s)",
+        atlas.width,
+        atlas.height,
+        atlas.charts,
+        atlas.density,
+        atlas.utilisation() * 100.0,
+        atlas_s
+    );
 
     let clustered = use_clustered(
         &args.hierarchy,
@@ -271,14 +284,6 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     )?;
     // The renderer's atlas, filled from the smooth field.
     let lap = Instant::now();
-    let atlas = radiant::scene::atlas::Atlas::new(&scene, args.lightmap_cell).map_err(|e| {
-        anyhow::anyhow!(
-            "the light map would be {}×{} texels even at 4 per chart (at most {} a side): the scene has too many triangles for it",
-            e.width,
-            e.height,
-            radiant::scene::atlas::MAX_SIDE
-        )
-    })?;
     let field = radiant::radiosity::smooth::SmoothField::new(
         &result.mesh,
         &result.system,
@@ -331,8 +336,12 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         "lightmap": {
             "width": map.width,
             "height": map.height,
-            "cell": atlas.cell,
+            "texel_density": atlas.density,
+            "texel_density_asked": args.texel_density,
+            "charts": atlas.charts,
+            "authored": atlas.authored,
             "utilisation": atlas.utilisation(),
+            "atlas_seconds": atlas_s,
             "seconds": lightmap_s,
         },
         "export": export,

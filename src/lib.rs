@@ -38,14 +38,15 @@ pub mod bridge {
     use radiant_render::scene::RenderScene;
     use radiant_scene::Scene;
 
-    /// The renderer's scene for `scene`, with `cell × cell` light-map texels per triangle, lit
-    /// by `bake` (or with an empty light map when there is no bake: a scene without emitters).
+    /// The renderer's scene for `scene`, its light map on the scene's atlas at `texel_density`
+    /// texels per unit (`None`: automatic), lit by `bake` (or with an empty light map when there
+    /// is no bake: a scene without emitters).
     pub fn render_scene(
         scene: &Scene,
         bake: Option<&BakeResult>,
-        cell: u32,
+        texel_density: Option<f64>,
     ) -> Result<RenderScene, RenderError> {
-        let mut rs = RenderScene::from_scene(scene, cell)?;
+        let mut rs = RenderScene::from_scene(scene, texel_density)?;
         if let Some(bake) = bake {
             fill_lightmap_from_bake(&mut rs, scene, bake);
             // The bake holds the punctual lights' direct light (shadowed): draw it once.

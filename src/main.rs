@@ -142,10 +142,11 @@ pub(crate) struct BakeArgs {
     /// (`lightmap`: texture, texCoord, scale, encoding).
     #[arg(long)]
     pub(crate) export: Option<PathBuf>,
-    /// Light-map texels along a triangle's chart (4 to 256; fewer where the atlas would pass
-    /// 8 M texels); the renderer's atlas.
-    #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u32).range(4..=256))]
-    pub(crate) lightmap_cell: u32,
+    /// Light-map texels per scene unit (metres for glTF); default: automatic (about 1024
+    /// texels per triangle, 8 M at most; Sponza gets 18 per metre). Lowered where the charts
+    /// would not fit one 8192² page.
+    #[arg(long, value_parser = crate::parse_texel_density)]
+    pub(crate) texel_density: Option<f64>,
     #[command(flatten)]
     pub(crate) hierarchy: HierarchyArgs,
     #[command(flatten)]
@@ -172,6 +173,16 @@ pub(crate) struct HierarchyArgs {
 }
 
 /// `4G`, `512M`, `64K` or a number of bytes.
+/// `--texel-density`: a positive, finite number of texels per scene unit.
+pub(crate) fn parse_texel_density(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(d) if d.is_finite() && d > 0.0 => Ok(d),
+        _ => Err(format!(
+            "{s:?} is not a positive number of texels per scene unit"
+        )),
+    }
+}
+
 fn parse_size(s: &str) -> Result<u64, String> {
     let t = s.trim();
     let (num, mul) = match t.char_indices().last() {

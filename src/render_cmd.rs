@@ -49,9 +49,11 @@ pub(crate) struct RenderArgs {
     /// Debug view: lit, albedo, normal, material, lightmap, emissive, depth, ao, direct.
     #[arg(long, default_value = "lit")]
     pub(crate) debug: String,
-    /// Light-map texels along a triangle's side (4 to 256).
-    #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u32).range(4..=256))]
-    pub(crate) lightmap_cell: u32,
+    /// Light-map texels per scene unit (metres for glTF); default: automatic (about 1024
+    /// texels per triangle, 8 M at most; Sponza gets 18 per metre). Lowered where the charts
+    /// would not fit one 8192² page.
+    #[arg(long, value_parser = crate::parse_texel_density)]
+    pub(crate) texel_density: Option<f64>,
     /// Solver for the bake.
     #[arg(long, default_value = "gauss-seidel")]
     pub(crate) method: String,
@@ -155,7 +157,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         None
     };
     let bake_s = start.elapsed().as_secs_f64();
-    let render_scene = radiant::bridge::render_scene(&scene, bake.as_ref(), args.lightmap_cell)?;
+    let render_scene = radiant::bridge::render_scene(&scene, bake.as_ref(), args.texel_density)?;
 
     let gpu = GpuContext::headless()?;
     let mut frame = FrameRenderer::new(&gpu, &render_scene)?;

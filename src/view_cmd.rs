@@ -36,9 +36,11 @@ pub(crate) struct ViewArgs {
     /// Form factors: analytic, hemicube, raycast or montecarlo.
     #[arg(long, default_value = "analytic")]
     pub(crate) form_factors: String,
-    /// Light-map texels along a triangle's side (4 to 256).
-    #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u32).range(4..=256))]
-    pub(crate) lightmap_cell: u32,
+    /// Light-map texels per scene unit (metres for glTF); default: automatic (about 1024
+    /// texels per triangle, 8 M at most; Sponza gets 18 per metre). Lowered where the charts
+    /// would not fit one 8192² page.
+    #[arg(long, value_parser = crate::parse_texel_density)]
+    pub(crate) texel_density: Option<f64>,
     #[command(flatten)]
     pub(crate) solve: SolveArgs,
 }
@@ -86,7 +88,7 @@ pub(crate) fn run(args: &ViewArgs) -> anyhow::Result<()> {
     options.size = parse_size(&args.size)?;
     options.inspector = !args.no_inspector;
     options.exit_after_frames = args.frames;
-    options.lightmap_cell = args.lightmap_cell;
+    options.texel_density = args.texel_density;
     options.bake = radiant::ecs::bake::RadiosityBake {
         params,
         checkpoint: Some(args.checkpoint.clone()),

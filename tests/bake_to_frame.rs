@@ -44,7 +44,7 @@ fn a_lamp_over_a_floor_is_drawn_once() {
         .expect("bake")
         .run_to_end(&mut |_| {})
         .expect("solve");
-    let rs = radiant::bridge::render_scene(&scene, Some(&bake), 64).expect("render scene");
+    let rs = radiant::bridge::render_scene(&scene, Some(&bake), None).expect("render scene");
     assert!(rs.lights.is_empty(), "the baked lamp would be drawn twice");
     let mut frame = FrameRenderer::new(&gpu, &rs).expect("renderer");
     let c = frame
@@ -91,10 +91,10 @@ fn cornell_light_map_texels_match_mitsuba_and_agree_across_shared_edges() {
         .expect("bake")
         .run_to_end(&mut |_| {})
         .expect("solve");
-    let rs = radiant::bridge::render_scene(&scene, Some(&bake), 32).expect("render scene");
+    let rs = radiant::bridge::render_scene(&scene, Some(&bake), None).expect("render scene");
     let lm = rs.lightmap.as_ref().expect("a light map");
     // The CLI's light map is the same atlas (`radiant bake` writes it as lightmap.exr).
-    let atlas = radiant::scene::atlas::Atlas::new(&scene, 32).expect("atlas");
+    let atlas = radiant::scene::atlas::Atlas::new(&scene, None).expect("atlas");
     assert_eq!((atlas.width, atlas.height), (lm.width, lm.height));
     for (t, uv) in atlas.uv.iter().enumerate() {
         for (k, c) in uv.iter().enumerate() {

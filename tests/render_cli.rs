@@ -75,8 +75,8 @@ fn disabled_effects_are_not_in_the_frame() {
             "cornell-box",
             "--patch-size",
             "0.3",
-            "--lightmap-cell",
-            "8",
+            "--texel-density",
+            "40",
             "--size",
             "32x32",
             "--no-ssao",
@@ -136,7 +136,8 @@ fn bad_render_flags_give_one_line() {
         vec!["--tonemap", "filmic-magic"],
         vec!["--debug", "xray"],
         vec!["--exposure", "nan"],
-        vec!["--lightmap-cell", "1"],
+        vec!["--texel-density", "0"],
+        vec!["--texel-density", "inf"],
     ] {
         let out = tmp("bad");
         let st = radiant()

@@ -46,8 +46,9 @@ pub struct DebugView(pub radiant_render::lighting::DebugView);
 pub struct RenderSettings {
     /// Frame size in pixels (default: 512 × 512).
     pub size: (u32, u32),
-    /// Light-map texels along a triangle's side; range 4..=256 (default: 32).
-    pub lightmap_cell: u32,
+    /// Light-map texels per scene unit (default `None`: the atlas's automatic density, see
+    /// `radiant_scene::atlas::Atlas::auto_density`).
+    pub texel_density: Option<f64>,
     /// Light updates whose largest relative change is below this are not uploaded, unless the
     /// bake converged (default: 0.002, under one 8-bit step).
     pub visible_change: f64,
@@ -62,7 +63,7 @@ impl Default for RenderSettings {
     fn default() -> Self {
         Self {
             size: (512, 512),
-            lightmap_cell: 32,
+            texel_density: None,
             visible_change: 0.002,
             capture: false,
             offscreen: true,
@@ -111,8 +112,8 @@ pub struct AtlasReport {
     pub width: u32,
     /// Height in texels.
     pub height: u32,
-    /// Texels along a chart's side.
-    pub cell: u32,
+    /// Charts (0 for an authored TEXCOORD_1).
+    pub charts: u32,
     /// Share of texels inside triangles.
     pub utilisation: f64,
     /// Texels per scene unit, area-weighted.
@@ -257,7 +258,7 @@ fn build_scene(
         return Ok(None);
     }
     let lit = world.resource::<BakedLighting>().clone();
-    let mut rs = RenderScene::from_scene(&scene, settings.lightmap_cell)?;
+    let mut rs = RenderScene::from_scene(&scene, settings.texel_density)?;
     if let (Some(mesh), Some(field)) = (&lit.mesh, &lit.field)
         && !lit.radiosity.is_empty()
     {
@@ -267,7 +268,7 @@ fn build_scene(
     let atlas = rs.atlas.as_ref().map(|a| AtlasReport {
         width: a.width,
         height: a.height,
-        cell: a.cell,
+        charts: a.charts,
         utilisation: a.utilisation(),
         texel_density: a.texel_density(&scene),
     });

@@ -17,7 +17,7 @@ fn app(bake: bool) -> App {
         .add_plugins(RenderPlugin)
         .insert_resource(RenderSettings {
             size: (64, 64),
-            lightmap_cell: 8,
+            texel_density: Some(40.0),
             capture: true,
             ..RenderSettings::default()
         });
@@ -126,7 +126,7 @@ fn extraction_uploads_only_what_changed() {
     // The inspector's figures of the uploaded light map's atlas.
     let atlas = app.world.resource::<RenderState>().atlas.expect("an atlas");
     assert!(
-        atlas.width > 0 && atlas.cell >= 4 && atlas.utilisation > 0.0 && atlas.texel_density > 0.0
+        atlas.width > 0 && atlas.charts > 0 && atlas.utilisation > 0.0 && atlas.texel_density > 0.0
     );
     let first = app
         .world

@@ -519,10 +519,10 @@ pub fn performance_panel(ui: &mut Ui, world: &mut World, state: &mut InspectorSt
     }
     if let Some(a) = &render.atlas {
         ui.label(format!(
-            "light map: {}×{} texels, {} per chart side, {:.0} % inside triangles, {:.1} texels/m",
+            "light map: {}×{} texels, {} charts, {:.0} % inside charts, {:.1} texels/m",
             a.width,
             a.height,
-            a.cell,
+            a.charts,
             a.utilisation * 100.0,
             a.texel_density
         ));

@@ -13,7 +13,7 @@
 //!
 //! let gpu = GpuContext::headless()?;
 //! let scene = radiant_scene::builtin("cornell-box").expect("builtin scene");
-//! let mut render_scene = RenderScene::from_scene(&scene, 16)?;
+//! let mut render_scene = RenderScene::from_scene(&scene, None)?;
 //! render_scene.fill_synthetic_lightmap(0.02);
 //! let mut frame = FrameRenderer::new(&gpu, &render_scene)?;
 //! let capture = frame.capture(&gpu, 256, 256, &FrameSettings::default())?;

@@ -141,6 +141,7 @@ pub fn scene(vertices: Vec<Vertex>, eye: Vec3, at: Vec3, h: f32) -> RenderScene 
         materials: Vec::new(),
         draws: Vec::new(),
         instances: Vec::new(),
+        instance_uvs: Vec::new(),
         sky: None,
         atlas: None,
         lights: Vec::new(),

@@ -430,7 +430,7 @@ fn tiled_culling_keeps_every_light_that_reaches_a_pixel_with_256_lights() {
 
 fn cornell() -> RenderScene {
     let scene = radiant_scene::builtin("cornell-box").expect("builtin");
-    let mut s = RenderScene::from_scene(&scene, 16).expect("convert");
+    let mut s = RenderScene::from_scene(&scene, None).expect("convert");
     s.fill_synthetic_lightmap(0.02);
     s
 }
@@ -1326,7 +1326,7 @@ fn props_scene() -> radiant_scene::Scene {
 fn repeated_props_draw_as_instances_and_look_as_if_flattened() {
     let gpu = gpu();
     let scene = props_scene();
-    let mut inst = RenderScene::from_scene(&scene, 8).expect("convert");
+    let mut inst = RenderScene::from_scene(&scene, None).expect("convert");
     // A light map that differs per texel position: a wrong light-map offset would show.
     inst.fill_lightmap(|t| {
         let p = t.position.as_vec3();
@@ -1340,7 +1340,7 @@ fn repeated_props_draw_as_instances_and_look_as_if_flattened() {
     let instanced: Vec<_> = inst.draws.iter().filter(|d| d.instance_count > 1).collect();
     assert_eq!(instanced.len(), 1, "{:?}", inst.draws);
     assert_eq!((instanced[0].count, instanced[0].instance_count), (36, 3));
-    let mut flat = RenderScene::from_scene_flattened(&scene, 8).expect("convert");
+    let mut flat = RenderScene::from_scene_flattened(&scene, None).expect("convert");
     assert!(flat.draws.iter().all(|d| d.instance_count == 1));
     flat.lightmap = inst.lightmap.clone();
     assert_eq!(flat.vertices, inst.vertices);

@@ -9,9 +9,9 @@
 //! plane (for flat surfaces, a similarity is assumed), then checked on every vertex, so a
 //! false match is impossible and a missed one only costs memory: it is drawn flattened.
 //!
-//! Light maps stay per instance: each surface's charts form one block of the atlas, and blocks
-//! of instances have the prototype's shape, so an instance samples its own light with the
-//! prototype's light-map coordinates plus its block's offset.
+//! Light maps stay per instance: every surface has its own charts in the atlas, so a copy's
+//! light-map coordinates are its own (`RenderScene::instance_uvs`, in the prototype's vertex
+//! order); the vertex shader reads them by vertex index from a storage buffer.
 
 use std::collections::HashMap;
 
@@ -19,7 +19,8 @@ use glam::{DAffine3, DMat3, DVec3};
 use radiant_scene::Scene;
 
 /// One drawn copy as the G-buffer's vertex shader reads it (112 bytes): rows of the
-/// origin-relative model matrix, rows of its normal matrix, and the light-map offset.
+/// origin-relative model matrix, rows of its normal matrix, and where its light-map
+/// coordinates are.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct InstanceData {
@@ -27,8 +28,10 @@ pub struct InstanceData {
     pub model: [[f32; 4]; 3],
     /// Rows of the normal matrix (inverse transpose of the model's 3 × 3), w unused.
     pub normal: [[f32; 4]; 3],
-    /// Added to the prototype's light-map coordinates (xy), zw unused.
-    pub lightmap_offset: [f32; 4],
+    /// Light-map coordinates: `[base, first, own, 0]`. With `own` = 1 the vertex at index `i`
+    /// of a draw starting at vertex `first` takes `RenderScene::instance_uvs[base + i - first]`;
+    /// with 0, the vertex's own (`first` is set by the upload, which knows where draws start).
+    pub lightmap: [u32; 4],
 }
 
 impl InstanceData {
@@ -44,12 +47,12 @@ impl InstanceData {
             [0.0, 1.0, 0.0, 0.0],
             [0.0, 0.0, 1.0, 0.0],
         ],
-        lightmap_offset: [0.0; 4],
+        lightmap: [0; 4],
     };
 
-    /// A copy placed by `m` (origin-relative: prototype position → copy position), its light
-    /// map shifted by `offset`.
-    pub fn new(m: DAffine3, offset: [f32; 2]) -> InstanceData {
+    /// A copy placed by `m` (origin-relative: prototype position → copy position), its light-map
+    /// coordinates at `base` of `RenderScene::instance_uvs`.
+    pub fn new(m: DAffine3, base: u32) -> InstanceData {
         let a = m.matrix3;
         let n = a.inverse().transpose();
         let t = m.translation;
@@ -60,7 +63,7 @@ impl InstanceData {
         InstanceData {
             model: [row(0, a, t.x), row(1, a, t.y), row(2, a, t.z)],
             normal: [row(0, n, 0.0), row(1, n, 0.0), row(2, n, 0.0)],
-            lightmap_offset: [offset[0], offset[1], 0.0, 0.0],
+            lightmap: [base, 0, 1, 0],
         }
     }
 }

@@ -100,6 +100,9 @@ pub enum RenderError {
     /// The scene has no triangles.
     #[error("the scene has no triangles to draw")]
     EmptyScene,
+    /// The scene's light-map atlas could not be made.
+    #[error("light-map atlas: {0}")]
+    Atlas(#[from] radiant_scene::atlas::AtlasError),
     /// An index past the vertex buffer.
     #[error("index {index} is past the {vertices} vertices")]
     IndexOutOfRange {

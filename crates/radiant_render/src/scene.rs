@@ -109,12 +109,9 @@ impl CameraView {
 }
 
 /// The largest light-map side [`RenderScene::from_scene`] makes (the WebGPU minimum of
-/// `max_texture_dimension_2d` is 8192).
+/// `max_texture_dimension_2d` is 8192): a scene whose charts would not fit gets a lower texel
+/// density, not a larger map.
 pub const MAX_LIGHTMAP_SIDE: u32 = radiant_scene::atlas::MAX_SIDE;
-
-/// The most texels [`RenderScene::from_scene`] gives its atlas (`radiant_scene::atlas`): a
-/// scene with many triangles gets fewer texels per triangle (down to 4 × 4), not a larger map.
-pub const MAX_LIGHTMAP_TEXELS: u64 = radiant_scene::atlas::MAX_TEXELS;
 
 /// A light map: incident radiance-weighted irradiance per texel (`H`, the bake's units: a
 /// surface of albedo `a` reflects radiance `a · H`), linear RGB.
@@ -160,8 +157,12 @@ pub struct RenderScene {
     /// with the default material, drawn once.
     pub draws: Vec<DrawRange>,
     /// How draws place their vertices: entry 0 (or none at all) is the identity; an instanced
-    /// draw's vertices are its prototype's, moved and given its light-map block per copy.
+    /// draw's vertices are its prototype's, moved and given their own light-map coordinates
+    /// per copy.
     pub instances: Vec<InstanceData>,
+    /// The copies' light-map coordinates: for each copy, one per vertex of its prototype's draw,
+    /// in that order (see [`InstanceData::lightmap`]).
+    pub instance_uvs: Vec<[f32; 2]>,
     /// What is seen where no geometry is (black without one).
     pub sky: Option<Sky>,
     /// The light map's layout, when [`RenderScene::from_scene`] made it.
@@ -176,30 +177,32 @@ pub struct RenderScene {
 
 impl RenderScene {
     /// Converts a radiosity scene: triangles with their vertex normals, base-colour textures,
-    /// alpha masks and one light-map chart each; the scene's lights, camera and sky; no light
-    /// map yet.
+    /// alpha masks and light-map coordinates; the scene's lights, camera and sky; no light map
+    /// yet.
     ///
-    /// Each triangle gets a `cell × cell` texel square in the atlas, a surface's squares one
-    /// block (blocks packed on shelves); its vertices map to three corners, inset by one texel
-    /// so bilinear filtering stays inside the chart. A scene whose atlas would pass
-    /// [`MAX_LIGHTMAP_TEXELS`] gets a smaller cell (not below 4). Surfaces that copy another
-    /// under an affine map ([`crate::instancing`]) are drawn as its instances.
-    pub fn from_scene(scene: &radiant_scene::Scene, cell: u32) -> Result<Self, RenderError> {
-        Self::build(scene, cell, true)
+    /// The light map is the scene's atlas (`radiant_scene::atlas`: its TEXCOORD_1, or charts
+    /// generated at `texel_density` texels per scene unit, `None` for the automatic density).
+    /// Surfaces that copy another under an affine map and share its chart layout
+    /// ([`crate::instancing`]) are drawn as its instances.
+    pub fn from_scene(
+        scene: &radiant_scene::Scene,
+        texel_density: Option<f64>,
+    ) -> Result<Self, RenderError> {
+        Self::build(scene, texel_density, true)
     }
 
     /// [`RenderScene::from_scene`] without instances: every triangle drawn on its own (the
     /// same frame from more vertices; for comparisons and benchmarks).
     pub fn from_scene_flattened(
         scene: &radiant_scene::Scene,
-        cell: u32,
+        texel_density: Option<f64>,
     ) -> Result<Self, RenderError> {
-        Self::build(scene, cell, false)
+        Self::build(scene, texel_density, false)
     }
 
     fn build(
         scene: &radiant_scene::Scene,
-        cell: u32,
+        texel_density: Option<f64>,
         instancing: bool,
     ) -> Result<Self, RenderError> {
         if scene.triangles.is_empty() {
@@ -232,22 +235,8 @@ impl RenderScene {
         for (i, t) in scene.triangles.iter().enumerate() {
             of_surface[t.surface as usize].push(i as u32);
         }
-        // The atlas (sizes checked before anything is allocated).
-        let atlas = radiant_scene::atlas::Atlas::new(scene, cell).map_err(|e| {
-            RenderError::InvalidSize {
-                width: e.width.min(u64::from(u32::MAX)) as u32,
-                height: e.height.min(u64::from(u32::MAX)) as u32,
-                max: MAX_LIGHTMAP_SIDE,
-            }
-        })?;
-        if atlas.cell < cell.clamp(4, 256) {
-            tracing::debug!(
-                "light-map cell {cell} → {} texels for {} triangles (at most {MAX_LIGHTMAP_TEXELS} texels)",
-                atlas.cell,
-                scene.triangles.len()
-            );
-        }
-        let (blocks, cell, w, h) = (&atlas.blocks, atlas.cell, atlas.width, atlas.height);
+        let atlas = radiant_scene::atlas::Atlas::new(scene, texel_density)?;
+        let (w, h) = (atlas.width, atlas.height);
         let mut vertices = Vec::with_capacity(scene.triangles.len() * 3);
         for (i, t) in scene.triangles.iter().enumerate() {
             let s = &scene.surfaces[t.surface as usize];
@@ -316,6 +305,7 @@ impl RenderScene {
             }
         }
         let mut instances = vec![InstanceData::IDENTITY];
+        let mut instance_uvs = Vec::new();
         for (p, list) in copies_of.iter().enumerate() {
             if list.is_empty() {
                 continue;
@@ -326,19 +316,19 @@ impl RenderScene {
             }
             let first_instance = instances.len() as u32;
             instances.push(InstanceData::IDENTITY);
-            let bp = blocks[p];
             for &(s, m) in list {
                 // Origin-relative: x − o ↦ A (x − o) + (A o + t − o).
                 let rel = glam::DAffine3::from_mat3_translation(
                     m.matrix3,
                     m.matrix3 * origin + m.translation - origin,
                 );
-                let bs = blocks[s as usize];
-                let offset = [
-                    ((f64::from(bs.x) - f64::from(bp.x)) * f64::from(cell) / f64::from(w)) as f32,
-                    ((f64::from(bs.y) - f64::from(bp.y)) * f64::from(cell) / f64::from(h)) as f32,
-                ];
-                instances.push(InstanceData::new(rel, offset));
+                // Its own charts, vertex for vertex with the prototype's (the copy's triangles
+                // pair with the prototype's in order).
+                let base = instance_uvs.len() as u32;
+                for &i in &of_surface[s as usize] {
+                    instance_uvs.extend((0..3).map(|k| vertices[i as usize * 3 + k].lightmap_uv));
+                }
+                instances.push(InstanceData::new(rel, base));
             }
             draws.push(DrawRange {
                 material: surface_material[p],
@@ -407,6 +397,7 @@ impl RenderScene {
             materials,
             draws,
             instances,
+            instance_uvs,
             sky: scene.sky.clone(),
             atlas: Some(atlas),
             lights,
@@ -606,6 +597,8 @@ pub struct GpuScene {
     pub vertex_count: u32,
     /// Per-instance buffer of [`InstanceData`] (entry 0 the identity).
     pub instances: wgpu::Buffer,
+    /// Storage buffer of the copies' light-map coordinates (one zeroed entry without copies).
+    pub instance_uvs: wgpu::Buffer,
     /// One per draw range: texture, sampler, constants and indices.
     pub materials: Vec<GpuMaterial>,
     /// [`SkyUniform`].
@@ -715,16 +708,15 @@ impl GpuScene {
                 )));
             }
         }
-        let instance_data: &[InstanceData] = if scene.instances.is_empty() {
-            &[InstanceData::IDENTITY]
+        let mut instance_data: Vec<InstanceData> = if scene.instances.is_empty() {
+            vec![InstanceData::IDENTITY]
         } else {
-            &scene.instances
+            scene.instances.clone()
         };
         let finite = |i: &InstanceData| {
             i.model
                 .iter()
                 .chain(&i.normal)
-                .chain(std::iter::once(&i.lightmap_offset))
                 .flatten()
                 .all(|x| x.is_finite())
         };
@@ -756,6 +748,26 @@ impl GpuScene {
                     .map(|&i| scene.vertices[i as usize]),
             );
             resolved.push(DrawRange { first, ..*d });
+            // Copies with their own light-map coordinates read them relative to this draw.
+            let range = d.first_instance as usize..(d.first_instance + d.instance_count) as usize;
+            for inst in &mut instance_data[range] {
+                if inst.lightmap[2] != 0 {
+                    inst.lightmap[1] = first;
+                    if u64::from(inst.lightmap[0]) + u64::from(d.count)
+                        > scene.instance_uvs.len() as u64
+                    {
+                        return Err(RenderError::InvalidScene(format!(
+                            "a copy's light-map coordinates {}..{} are past the {} given",
+                            inst.lightmap[0],
+                            u64::from(inst.lightmap[0]) + u64::from(d.count),
+                            scene.instance_uvs.len()
+                        )));
+                    }
+                }
+            }
+        }
+        if !scene.instance_uvs.iter().flatten().all(|x| x.is_finite()) {
+            return Err(RenderError::NonFinite("instance light-map coordinates"));
         }
         let materials = cache.upload(
             dev,
@@ -775,8 +787,18 @@ impl GpuScene {
         });
         let instances = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("scene_instances"),
-            contents: bytemuck::cast_slice(instance_data),
+            contents: bytemuck::cast_slice(&instance_data),
             usage: wgpu::BufferUsages::VERTEX,
+        });
+        let no_uvs = [[0.0f32; 2]];
+        let instance_uvs = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("scene_instance_uvs"),
+            contents: bytemuck::cast_slice(if scene.instance_uvs.is_empty() {
+                &no_uvs
+            } else {
+                &scene.instance_uvs
+            }),
+            usage: wgpu::BufferUsages::STORAGE,
         });
         let mut lights: Vec<GpuLight> = Vec::with_capacity(scene.lights.len().max(1));
         for l in &scene.lights {
@@ -873,6 +895,7 @@ impl GpuScene {
             vertex_count: drawn.len() as u32,
             vertices,
             instances,
+            instance_uvs,
             materials,
             sky,
             sky_image,
@@ -1044,7 +1067,7 @@ mod tests {
             t.uv[0] = [Vec2::ZERO, Vec2::X, Vec2::Y];
             scene.triangles.push(t);
         }
-        let rs = RenderScene::from_scene(&scene, 8).expect("convert");
+        let rs = RenderScene::from_scene(&scene, None).expect("convert");
         // The two plain surfaces share one material; the textured one has its own.
         assert_eq!(rs.materials.len(), 2);
         let m = rs.materials[1];
@@ -1061,7 +1084,7 @@ mod tests {
         assert_eq!(rs.vertices[5].normal, [0.6, 0.0, 0.8]);
         assert_eq!(rs.vertices[4].normal, [0.0, 0.0, 1.0]);
         // The second wall is the first moved by 2 along z: drawn as its instance, with its own
-        // light-map block. The rest is drawn flattened, grouped by material.
+        // light-map charts. The rest is drawn flattened, grouped by material.
         assert_eq!(rs.draws.len(), 2, "{:?}", rs.draws);
         let (flat, inst) = (rs.draws[0], rs.draws[1]);
         assert_eq!((flat.material, flat.instance_count), (1, 1));
@@ -1075,42 +1098,45 @@ mod tests {
         assert_eq!(rs.indices[inst.first as usize], 0);
         let copy = rs.instances[(inst.first_instance + 1) as usize];
         assert_eq!(copy.model[2][3], 2.0, "{copy:?}");
+        // Its light-map coordinates are its own: the copy's triangle's, in the prototype's order.
+        assert_eq!(copy.lightmap[2], 1);
+        assert_eq!(rs.instances[inst.first_instance as usize].lightmap[2], 0);
+        let base = copy.lightmap[0] as usize;
         for k in 0..3 {
-            let (p, c) = (rs.vertices[k], rs.vertices[6 + k]);
-            for a in 0..2 {
-                let moved = p.lightmap_uv[a] + copy.lightmap_offset[a];
-                assert!(
-                    (moved - c.lightmap_uv[a]).abs() < 1e-6,
-                    "{moved} vs {:?}",
-                    c.lightmap_uv
-                );
-            }
+            assert_eq!(rs.instance_uvs[base + k], rs.vertices[6 + k].lightmap_uv);
+            assert_ne!(rs.vertices[k].lightmap_uv, rs.vertices[6 + k].lightmap_uv);
         }
     }
 
     #[test]
-    fn many_triangles_get_a_smaller_light_map_cell_not_a_larger_map() {
-        let mut scene = radiant_scene::builtin("cornell-box").expect("builtin");
-        let t = scene.triangles[0];
-        // As many as Sponza: 512 × 512 charts; a 32-texel cell would need 16384² texels.
-        scene.triangles = vec![t; 1 << 18];
-        let rs = RenderScene::from_scene(&scene, 32).expect("convert");
-        let lm = rs.lightmap.as_ref().expect("light map");
-        assert!(u64::from(lm.width) * u64::from(lm.height) <= MAX_LIGHTMAP_TEXELS);
-        // 5-texel cells (a 32-texel cell would need about 16 800² texels).
-        assert_eq!((lm.width % 5, lm.height % 5), (0, 0));
-        assert!(lm.width / 5 * (lm.height / 5) >= 1 << 18);
-        assert!(
-            rs.vertices
-                .iter()
-                .all(|v| { v.lightmap_uv.iter().all(|&c| (0.0..=1.0).contains(&c)) })
+    fn the_light_map_is_the_scenes_atlas_at_the_asked_density() {
+        let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+        let rs = RenderScene::from_scene(&scene, Some(300.0)).expect("convert");
+        let atlas = rs.atlas.as_ref().expect("atlas");
+        assert_eq!(
+            *atlas,
+            radiant_scene::atlas::Atlas::new(&scene, Some(300.0)).expect("atlas")
         );
+        let lm = rs.lightmap.as_ref().expect("light map");
+        assert_eq!((lm.width, lm.height), (atlas.width, atlas.height));
+        assert!((atlas.texel_density(&scene) / 300.0 - 1.0).abs() < 0.1);
+        // Flattened, every vertex carries its triangle's atlas coordinates.
+        let flat = RenderScene::from_scene_flattened(&scene, Some(300.0)).expect("convert");
+        for (tri, uv) in flat.vertices.chunks_exact(3).zip(&atlas.uv) {
+            for k in 0..3 {
+                assert_eq!(tri[k].lightmap_uv, uv[k].to_array());
+            }
+        }
+        assert!(matches!(
+            RenderScene::from_scene(&scene, Some(f64::NAN)),
+            Err(RenderError::Atlas(_))
+        ));
     }
 
     #[test]
     fn cornell_conversion_keeps_every_triangle_and_a_valid_atlas() {
         let scene = radiant_scene::builtin("cornell-box").expect("builtin");
-        let mut rs = RenderScene::from_scene(&scene, 16).expect("convert");
+        let mut rs = RenderScene::from_scene(&scene, None).expect("convert");
         assert_eq!(rs.vertices.len(), scene.triangles.len() * 3);
         assert!(
             rs.vertices

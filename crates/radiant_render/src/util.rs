@@ -14,6 +14,20 @@ pub fn uniform_entry(binding: u32, stages: wgpu::ShaderStages) -> wgpu::BindGrou
     }
 }
 
+/// A read-only storage buffer binding visible to `stages`.
+pub fn storage_entry(binding: u32, stages: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: stages,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only: true },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
 /// A 2D texture binding for fragment and compute shaders.
 pub fn texture_entry(
     binding: u32,

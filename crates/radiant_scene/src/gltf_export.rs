@@ -539,7 +539,7 @@ mod tests {
     #[test]
     fn a_round_trip_reads_back_the_scene_its_light_map_uvs_and_the_light_map() {
         let scene = crate::builtin("cornell-box").expect("builtin");
-        let atlas = Atlas::new(&scene, 16).expect("atlas");
+        let atlas = Atlas::new(&scene, None).expect("atlas");
         // A light map that varies across the atlas.
         let texels: Vec<[f32; 3]> = (0..atlas.width * atlas.height)
             .map(|i| {

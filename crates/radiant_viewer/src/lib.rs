@@ -83,8 +83,8 @@ pub struct ViewerOptions {
     pub exit_after_frames: Option<u64>,
     /// Show the inspector at start (default: true).
     pub inspector: bool,
-    /// Light-map texels along a triangle's side (default: 32).
-    pub lightmap_cell: u32,
+    /// Light-map texels per scene unit (default `None`: automatic).
+    pub texel_density: Option<f64>,
 }
 
 impl ViewerOptions {
@@ -97,7 +97,7 @@ impl ViewerOptions {
             bake: RadiosityBake::default(),
             exit_after_frames: None,
             inspector: true,
-            lightmap_cell: 32,
+            texel_density: None,
         }
     }
 }
@@ -331,7 +331,7 @@ impl Viewer {
             .add_plugins(RenderPlugin)
             .insert_resource(Gpu(gpu))
             .insert_resource(RenderSettings {
-                lightmap_cell: self.options.lightmap_cell,
+                texel_density: self.options.texel_density,
                 offscreen: false,
                 ..RenderSettings::default()
             })

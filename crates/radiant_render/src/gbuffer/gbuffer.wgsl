@@ -9,6 +9,8 @@
 @group(0) @binding(0) var<uniform> camera: Camera;
 @group(0) @binding(1) var lightmap: texture_2d<f32>;
 @group(0) @binding(2) var lightmap_sampler: sampler;
+// Copies' own light-map coordinates, in their prototype's vertex order.
+@group(0) @binding(3) var<storage, read> instance_uvs: array<vec2<f32>>;
 @group(1) @binding(0) var base_color: texture_2d<f32>;
 @group(1) @binding(1) var base_color_sampler: sampler;
 @group(1) @binding(2) var<uniform> material: Material;
@@ -30,7 +32,8 @@ struct VertexIn {
     @location(5) uv: vec2<f32>,
 };
 
-// Per instance: rows of the model matrix, rows of the normal matrix, the light-map offset.
+// Per instance: rows of the model matrix, rows of the normal matrix, and where its light-map
+// coordinates are: x base in `instance_uvs`, y the draw's first vertex, z 1 if its own.
 struct InstanceIn {
     @location(6) m0: vec4<f32>,
     @location(7) m1: vec4<f32>,
@@ -38,7 +41,7 @@ struct InstanceIn {
     @location(9) n0: vec4<f32>,
     @location(10) n1: vec4<f32>,
     @location(11) n2: vec4<f32>,
-    @location(12) lightmap_offset: vec4<f32>,
+    @location(12) lightmap: vec4<u32>,
 };
 
 struct VertexOut {
@@ -51,7 +54,7 @@ struct VertexOut {
 };
 
 @vertex
-fn gbuffer_vs(v: VertexIn, inst: InstanceIn) -> VertexOut {
+fn gbuffer_vs(v: VertexIn, inst: InstanceIn, @builtin(vertex_index) index: u32) -> VertexOut {
     var out: VertexOut;
     let p = vec4<f32>(v.position, 1.0);
     let world = vec3<f32>(dot(inst.m0, p), dot(inst.m1, p), dot(inst.m2, p));
@@ -59,7 +62,10 @@ fn gbuffer_vs(v: VertexIn, inst: InstanceIn) -> VertexOut {
     out.normal = vec3<f32>(dot(inst.n0.xyz, v.normal), dot(inst.n1.xyz, v.normal), dot(inst.n2.xyz, v.normal));
     out.albedo = v.albedo;
     out.emissive = v.emissive;
-    out.lightmap_uv = v.lightmap_uv + inst.lightmap_offset.xy;
+    out.lightmap_uv = v.lightmap_uv;
+    if (inst.lightmap.z != 0u) {
+        out.lightmap_uv = instance_uvs[inst.lightmap.x + index - inst.lightmap.y];
+    }
     out.uv = v.uv;
     return out;
 }

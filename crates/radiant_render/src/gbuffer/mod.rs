@@ -63,6 +63,7 @@ impl GBufferPipeline {
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                     count: None,
                 },
+                crate::util::storage_entry(3, wgpu::ShaderStages::VERTEX),
             ],
         });
         let material_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -89,7 +90,7 @@ impl GBufferPipeline {
         ];
         let instance_attributes = wgpu::vertex_attr_array![
             6 => Float32x4, 7 => Float32x4, 8 => Float32x4,
-            9 => Float32x4, 10 => Float32x4, 11 => Float32x4, 12 => Float32x4
+            9 => Float32x4, 10 => Float32x4, 11 => Float32x4, 12 => Uint32x4
         ];
         let target = |format| {
             Some(wgpu::ColorTargetState {
@@ -211,6 +212,10 @@ pub fn gbuffer_pass(
                 wgpu::BindGroupEntry {
                     binding: 2,
                     resource: wgpu::BindingResource::Sampler(&scene.linear_sampler),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: scene.instance_uvs.as_entire_binding(),
                 },
             ],
         });

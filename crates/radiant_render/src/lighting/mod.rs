@@ -9,7 +9,7 @@ use crate::context::Requirements;
 use crate::gbuffer::{GBuffer, HDR_FORMAT};
 use crate::graph::{RenderGraph, TextureDesc, TextureHandle};
 use crate::scene::GpuScene;
-use crate::util::{texture_entry, uniform_entry};
+use crate::util::{storage_entry, texture_entry, uniform_entry};
 
 /// The shader source (with the shared prelude).
 pub fn shader_source() -> String {
@@ -107,16 +107,7 @@ impl LightingPipeline {
         let float = wgpu::TextureSampleType::Float { filterable: false };
         let mut entries = vec![
             uniform_entry(0, wgpu::ShaderStages::COMPUTE),
-            wgpu::BindGroupLayoutEntry {
-                binding: 1,
-                visibility: wgpu::ShaderStages::COMPUTE,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage { read_only: true },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            },
+            storage_entry(1, wgpu::ShaderStages::COMPUTE),
         ];
         for b in 2..=6 {
             entries.push(texture_entry(b, float));
