@@ -21,7 +21,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use glam::{Vec3, Vec3A};
-use obvhs::{BvhBuildParams, bvh2::Bvh2, ray::Ray};
+use obvhs::{BvhBuildParams, cwbvh::CwBvh, ray::Ray};
 
 /// Fraction of a segment's length cut from each end, so that the surfaces at its end points do
 /// not block it.
@@ -110,6 +110,13 @@ impl Tri {
     }
 }
 
+/// `d` with every `-0.0` made `+0.0`. The CWBVH's node test takes a component's sign from
+/// `d < 0` but its inverse from the sign bit, so a `-0.0` (as in `-0.0 - 0.0`) would flip that
+/// axis's slab and miss every node.
+fn positive_zeros(d: Vec3) -> Vec3A {
+    Vec3A::from(d) + Vec3A::ZERO
+}
+
 fn ray_tmin(dir: Vec3) -> f32 {
     // A tiny offset relative to the direction's length.
     1e-6 / dir.length().max(f32::MIN_POSITIVE) * 1e-1
@@ -159,9 +166,11 @@ impl Visibility for BruteForce {
     }
 }
 
-/// A BVH over the triangles, built with `obvhs` (PLOC, medium preset).
+/// A BVH over the triangles, built with `obvhs`: PLOC (medium preset), then collapsed into its
+/// compressed 8-wide layout (CWBVH, Ylitie et al. 2017), whose traversal tests eight children
+/// per node at once.
 pub struct Bvh {
-    bvh: Bvh2,
+    bvh: CwBvh,
     /// Triangles in BVH order.
     tris: Vec<Tri>,
     /// BVH order → caller's index.
@@ -203,7 +212,7 @@ impl Bvh {
     fn build(triangles: &[[Vec3; 3]]) -> Self {
         if triangles.is_empty() {
             return Bvh {
-                bvh: Bvh2::default(),
+                bvh: CwBvh::default(),
                 tris: Vec::new(),
                 ids: Vec::new(),
                 filter: None,
@@ -217,7 +226,7 @@ impl Bvh {
                 v2: t[2].into(),
             })
             .collect();
-        let bvh = obvhs::bvh2::builder::build_bvh2_from_tris(
+        let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
             &obvhs_tris,
             BvhBuildParams::medium_build(),
             &mut Duration::default(),
@@ -241,7 +250,7 @@ impl Visibility for Bvh {
         if self.tris.is_empty() {
             return true;
         }
-        let (o, d) = (Vec3A::from(a), Vec3A::from(b - a));
+        let (o, d) = (Vec3A::from(a), positive_zeros(b - a));
         let ray = Ray::new(o, d, SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON);
         self.bvh.ray_traverse_miss(ray, |r, id| {
             match self.tris[id].intersect(r.origin, r.direction, r.tmin, r.tmax) {
@@ -255,7 +264,7 @@ impl Visibility for Bvh {
         if self.tris.is_empty() {
             return None;
         }
-        let (o, d) = (Vec3A::from(origin), Vec3A::from(dir));
+        let (o, d) = (Vec3A::from(origin), positive_zeros(dir));
         let ray = Ray::new(o, d, ray_tmin(dir), tmax);
         let mut hit = obvhs::ray::RayHit::none();
         let mut best: Option<(f32, f32, f32, bool, usize)> = None;
@@ -357,6 +366,29 @@ mod tests {
             let front = vis.closest_hit(-Vec3::Y, Vec3::Y, 10.0).expect("hit");
             let back = vis.closest_hit(Vec3::Y, -Vec3::Y, 10.0).expect("hit");
             assert!(front.front && !back.front);
+        }
+    }
+
+    #[test]
+    fn axis_aligned_segments_with_negative_zeros_are_blocked() {
+        // Floors of 1 to 40 triangles; the segment's direction is (-0, -2, -0).
+        for n in [1usize, 2, 9, 40] {
+            let tris: Vec<[Vec3; 3]> = (0..n)
+                .map(|i| {
+                    let x = i as f32 * 2.0;
+                    [
+                        Vec3::new(x - 1., 0., -1.),
+                        Vec3::new(x + 1., 0., -1.),
+                        Vec3::new(x, 0., 1.),
+                    ]
+                })
+                .collect();
+            let bvh = Bvh::new(&tris);
+            assert!(!bvh.segment_clear(Vec3::Y, -Vec3::Y), "{n} triangles");
+            assert!(
+                bvh.closest_hit(Vec3::Y, -Vec3::Y, 10.0).is_some(),
+                "{n} triangles"
+            );
         }
     }
 
