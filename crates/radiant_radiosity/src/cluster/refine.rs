@@ -322,8 +322,13 @@ impl Refiner<'_> {
             return self.planar(r, s, n, &mut rng);
         }
         // A cluster link's estimate is its form factor too, not only its visibility: never
-        // fewer than half the full count.
-        let n = n.max(self.samples.div_ceil(2));
+        // fewer than half the full count, unless it carries so little that one would do for
+        // a triangle pair.
+        let n = if n <= 1 {
+            1
+        } else {
+            n.max(self.samples.div_ceil(2))
+        };
         let a_s = self.tree.area[s as usize];
         let da = a_s / f64::from(n);
         let mut sum = 0.0;
