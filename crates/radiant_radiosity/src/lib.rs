@@ -2,8 +2,9 @@
 //! error metrics and light maps. No GPU, no ECS.
 //!
 //! The conventions (see `ARCHITECTURE.md`): `F_ij` is the fraction of the energy leaving element
-//! `i`… gathered at `i` from `j`, in the form `B_i = S_i + ρ_i Σ_j F_ij B_j`, with radiosity in
-//! glTF emissive units (a lone emitter of emissive 1 outputs 1).
+//! `i` that arrives at element `j` (reciprocity: `A_i F_ij = A_j F_ji`), and `i` gathers `j`'s
+//! radiosity with it: `B_i = S_i + ρ_i Σ_j F_ij B_j`, with radiosity in glTF emissive units (a
+//! lone emitter of emissive 1 outputs 1).
 //!
 //! ```
 //! use radiant_radiosity::{Bake, BakeParams};

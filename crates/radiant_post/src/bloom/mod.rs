@@ -53,8 +53,8 @@ pub struct Bloom {
     pub composite: BloomComposite,
     /// Fraction of the thresholded light that is spread; range [0, 1] (default: 0.15).
     pub intensity: f32,
-    /// Radiance (max channel, after exposure is not applied) where bloom starts; 0 blooms
-    /// everything; range [0, ∞) (default: 1).
+    /// Radiance (max channel of the HDR image, before exposure: tone mapping applies that
+    /// afterwards) where bloom starts; 0 blooms everything; range [0, ∞) (default: 1).
     pub threshold: f32,
     /// Softness of the threshold as a fraction of it; range [0, 1] (default: 0.5).
     pub knee: f32,
