@@ -292,7 +292,9 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     );
     let map = lightmap::bake_lightmap(&scene, &atlas, &result.mesh, &field);
     let lightmap_s = lap.elapsed().as_secs_f64();
+    let lap = Instant::now();
     output::write_lightmaps(out, &map)?;
+    let write_s = lap.elapsed().as_secs_f64();
     let export = match &args.export {
         Some(path) => {
             let lap = Instant::now();
@@ -343,6 +345,7 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
             "utilisation": atlas.utilisation(),
             "atlas_seconds": atlas_s,
             "seconds": lightmap_s,
+            "write_seconds": write_s,
         },
         "export": export,
     });

@@ -36,7 +36,7 @@ pub(crate) struct ViewArgs {
     /// Form factors: analytic, hemicube, raycast or montecarlo.
     #[arg(long, default_value = "analytic")]
     pub(crate) form_factors: String,
-    /// Light-map texels per scene unit (metres for glTF); default: automatic (about 1024
+    /// Light-map texels per scene unit (metres for glTF); default: automatic (about 256
     /// texels per triangle, 8 M at most; Sponza gets 18 per metre). Lowered where the charts
     /// would not fit one 8192² page.
     #[arg(long, value_parser = crate::parse_texel_density)]

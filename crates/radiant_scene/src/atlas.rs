@@ -30,7 +30,7 @@ pub const AUTO_CHART_TEXELS: f64 = 8.0 * 1024.0 * 1024.0;
 
 /// Texels inside charts an automatic density gives each triangle (so a small scene gets a
 /// small map), at least [`AUTO_MIN_CHART_TEXELS`] in all.
-pub const AUTO_TEXELS_PER_TRIANGLE: f64 = 1024.0;
+pub const AUTO_TEXELS_PER_TRIANGLE: f64 = 256.0;
 
 /// The fewest texels inside charts an automatic density aims at (a 512² map's worth).
 pub const AUTO_MIN_CHART_TEXELS: f64 = 512.0 * 512.0;
