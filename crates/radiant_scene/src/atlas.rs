@@ -84,12 +84,7 @@ impl Atlas {
     /// [`Atlas::auto_density`]): its authored TEXCOORD_1 where usable (see the module), else
     /// generated.
     pub fn new(scene: &Scene, density: Option<f64>) -> Result<Atlas, AtlasError> {
-        let area: f64 = scene
-            .triangles
-            .iter()
-            .map(crate::Triangle::area)
-            .filter(|a| a.is_finite())
-            .sum();
+        let area = surface_area(scene);
         if area <= 0.0 {
             return Err(AtlasError::NoArea);
         }
@@ -107,12 +102,7 @@ impl Atlas {
     /// The automatic texel density of `scene`: charts of about [`AUTO_TEXELS_PER_TRIANGLE`]
     /// texels per triangle, between [`AUTO_MIN_CHART_TEXELS`] and [`AUTO_CHART_TEXELS`] in all.
     pub fn auto_density(scene: &Scene) -> f64 {
-        let area: f64 = scene
-            .triangles
-            .iter()
-            .map(crate::Triangle::area)
-            .filter(|a| a.is_finite())
-            .sum();
+        let area = surface_area(scene);
         let texels = (scene.triangles.len() as f64 * AUTO_TEXELS_PER_TRIANGLE)
             .clamp(AUTO_MIN_CHART_TEXELS, AUTO_CHART_TEXELS);
         if area > 0.0 {
@@ -239,7 +229,7 @@ impl Atlas {
             .collect();
         // The asked density, lower where the page would pass MAX_SIDE: first by the charts'
         // area (packed pages are at best about two thirds chart), then by the packed size.
-        let area: f64 = scene.triangles.iter().map(crate::Triangle::area).sum();
+        let area = surface_area(scene);
         let most = (0.6 * f64::from(MAX_SIDE).powi(2) / area).sqrt();
         let mut used = density.min(most);
         let mut last = (0, 0);
@@ -343,6 +333,16 @@ impl Atlas {
     pub fn utilisation(&self) -> f64 {
         self.uv.iter().map(uv_area).sum::<f64>().min(1.0)
     }
+}
+
+/// The scene's triangles' total area (finite ones).
+fn surface_area(scene: &Scene) -> f64 {
+    scene
+        .triangles
+        .iter()
+        .map(crate::Triangle::area)
+        .filter(|a| a.is_finite())
+        .sum()
 }
 
 /// A chart's area in the unit square.
