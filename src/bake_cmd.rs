@@ -150,10 +150,12 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     ensure_dir(&args.out)?;
     // The light map's atlas first: a density it cannot use fails before the bake, not after.
     let lap = Instant::now();
-    let atlas = radiant::scene::atlas::Atlas::new(&scene, args.texel_density)?;
+    let atlas =
+        radiant::scene::atlas::Atlas::paged(&scene, args.texel_density, args.lightmap_page)?;
     let atlas_s = lap.elapsed().as_secs_f64();
     println!(
-        "light-map atlas: {}×{} texels, {} charts, {:.1} texels/unit, {:.1} % inside charts ({:.2} s)",
+        "light-map atlas: {} page(s) of {}×{} texels, {} charts, {:.1} texels/unit, {:.1} % inside charts ({:.2} s)",
+        atlas.pages,
         atlas.width,
         atlas.height,
         atlas.charts,
@@ -307,18 +309,17 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
                 path,
             )?;
             println!(
-                "exported {} ({} primitives, light map texture {}, {:.2} MB) in {:.2} s",
+                "exported {} ({} primitives, light-map textures {:?}, {:.2} MB) in {:.2} s",
                 path.display(),
                 r.primitives,
-                r.lightmap_texture
-                    .map_or("none".to_string(), |t| t.to_string()),
+                r.lightmap_textures,
                 r.bytes as f64 / 1e6,
                 lap.elapsed().as_secs_f64()
             );
             json!({
                 "path": path.display().to_string(),
                 "primitives": r.primitives,
-                "lightmap_texture": r.lightmap_texture,
+                "lightmap_textures": r.lightmap_textures,
                 "lightmap_scale": r.lightmap_scale,
                 "bytes": r.bytes,
                 "seconds": lap.elapsed().as_secs_f64(),
@@ -338,6 +339,7 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         "lightmap": {
             "width": map.width,
             "height": map.height,
+            "pages": map.pages,
             "texel_density": atlas.density,
             "texel_density_asked": args.texel_density,
             "charts": atlas.charts,

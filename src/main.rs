@@ -147,6 +147,11 @@ pub(crate) struct BakeArgs {
     /// would not fit one 8192² page.
     #[arg(long, value_parser = crate::parse_texel_density)]
     pub(crate) texel_density: Option<f64>,
+    /// Largest light-map page side in texels (64 to 8192): charts that do not fit one page go
+    /// on several (`lightmap.exr` stacks them top to bottom; `--export` writes one image each).
+    #[arg(long, default_value_t = radiant::scene::atlas::MAX_SIDE,
+          value_parser = clap::value_parser!(u32).range(64..=8192))]
+    pub(crate) lightmap_page: u32,
     #[command(flatten)]
     pub(crate) hierarchy: HierarchyArgs,
     #[command(flatten)]

@@ -175,21 +175,22 @@ fn finite(x: f64) -> Value {
     if x.is_finite() { json!(x) } else { Value::Null }
 }
 
-/// Writes the light map as OpenEXR (linear f32 RGB) and a tone-mapped sRGB PNG preview.
+/// Writes `lightmap.exr` (linear f32) and `lightmap.png` (a tone-mapped preview): a light map
+/// of several pages is one image of its pages stacked top to bottom (`width × height·pages`).
 pub fn write_lightmaps(dir: &Path, map: &LightMap) -> anyhow::Result<()> {
+    let (width, height) = (map.width, map.height * map.pages.max(1));
     let data: Vec<f32> = map
         .texels
         .iter()
         .flat_map(|t| t.map(|v| if v.is_finite() { v.max(0.0) } else { 0.0 }))
         .collect();
-    let img =
-        image::Rgb32FImage::from_raw(map.width, map.height, data).context("light-map size")?;
+    let img = image::Rgb32FImage::from_raw(width, height, data).context("light-map size")?;
     let mut exr = std::io::Cursor::new(Vec::new());
     image::DynamicImage::ImageRgb32F(img)
         .write_to(&mut exr, image::ImageFormat::OpenExr)
         .context("encoding the EXR light map")?;
     write_atomic(&dir.join("lightmap.exr"), exr.get_ref())?;
-    let png = preview_png(map.width, map.height, &map.texels)?;
+    let png = preview_png(width, height, &map.texels)?;
     write_atomic(&dir.join("lightmap.png"), &png)
 }
 

@@ -604,6 +604,11 @@ fn bake_exports_binary_gltf_that_the_khronos_validator_accepts() {
             "cornell-box",
             "--patch-size",
             "0.3",
+            // Small pages, so the light map takes several: one image each in the file.
+            "--texel-density",
+            "100",
+            "--lightmap-page",
+            "64",
             "--export",
             glb.to_str().expect("utf-8 path"),
         ],
@@ -616,6 +621,22 @@ fn bake_exports_binary_gltf_that_the_khronos_validator_accepts() {
         serde_json::from_slice(&std::fs::read(out.join("report.json")).expect("report"))
             .expect("json");
     assert_eq!(report["parameters"]["export"]["primitives"], 19);
+    let lm = &report["parameters"]["lightmap"];
+    let pages = lm["pages"].as_u64().expect("pages");
+    assert!(pages > 1, "{lm}");
+    assert_eq!(
+        report["parameters"]["export"]["lightmap_textures"]
+            .as_array()
+            .expect("textures")
+            .len() as u64,
+        pages
+    );
+    // lightmap.exr stacks the pages top to bottom.
+    let exr = image::open(out.join("lightmap.exr")).expect("lightmap.exr");
+    assert_eq!(
+        (u64::from(exr.width()), u64::from(exr.height())),
+        (64, 64 * pages)
+    );
     // The Khronos validator, where npm put it (tools/test.sh installs it when npm exists).
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let modules = std::env::var_os("RADIANT_GLTF_VALIDATOR")

@@ -108,10 +108,12 @@ impl RenderState {
 /// The light-map atlas of the uploaded scene, for the inspector.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AtlasReport {
-    /// Width in texels.
+    /// Width of a page in texels.
     pub width: u32,
-    /// Height in texels.
+    /// Height of a page in texels.
     pub height: u32,
+    /// Pages.
+    pub pages: u32,
     /// Charts (0 for an authored TEXCOORD_1).
     pub charts: u32,
     /// Share of texels inside triangles.
@@ -268,6 +270,7 @@ fn build_scene(
     let atlas = rs.atlas.as_ref().map(|a| AtlasReport {
         width: a.width,
         height: a.height,
+        pages: a.pages,
         charts: a.charts,
         utilisation: a.utilisation(),
         texel_density: a.texel_density(&scene),

@@ -519,7 +519,8 @@ pub fn performance_panel(ui: &mut Ui, world: &mut World, state: &mut InspectorSt
     }
     if let Some(a) = &render.atlas {
         ui.label(format!(
-            "light map: {}×{} texels, {} charts, {:.0} % inside charts, {:.1} texels/m",
+            "light map: {} × {}×{} texels, {} charts, {:.0} % inside charts, {:.1} texels/m",
+            a.pages,
             a.width,
             a.height,
             a.charts,

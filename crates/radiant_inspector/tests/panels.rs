@@ -348,13 +348,14 @@ fn performance_panel_shows_timings() {
         Some(radiant_ecs::render::AtlasReport {
             width: 224,
             height: 224,
+            pages: 1,
             charts: 41,
             utilisation: 0.32,
             texel_density: 123.4,
         });
     h.run();
     h.get_by_label_contains(
-        "light map: 224×224 texels, 41 charts, 32 % inside charts, 123.4 texels/m",
+        "light map: 1 × 224×224 texels, 41 charts, 32 % inside charts, 123.4 texels/m",
     );
 }
 

@@ -126,6 +126,7 @@ pub fn quad(vertices: &mut Vec<Vertex>, p0: Vec3, u: Vec3, v: Vec3, albedo: [f32
             emissive: [0.0; 3],
             lightmap_uv: [0.5, 0.5],
             uv: uvs[k],
+            lightmap_page: 0,
         });
     }
 }
@@ -156,6 +157,7 @@ pub fn scene(vertices: Vec<Vertex>, eye: Vec3, at: Vec3, h: f32) -> RenderScene 
         lightmap: Some(radiant_render::scene::LightMap {
             width: 1,
             height: 1,
+            pages: 1,
             texels: vec![[h; 3]],
         }),
     }

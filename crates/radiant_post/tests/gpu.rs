@@ -1378,3 +1378,53 @@ fn repeated_props_draw_as_instances_and_look_as_if_flattened() {
         );
     }
 }
+
+#[test]
+fn a_light_map_of_several_pages_looks_like_one_page() {
+    let gpu = gpu();
+    let scene = props_scene();
+    // Smooth light, so two layouts of one density sample nearly the same values.
+    let light = |t: &radiant_render::scene::LightmapTexel| {
+        let p = t.position.as_vec3();
+        [0.4 + 0.3 * p.x, 0.5 + 0.2 * p.z, 0.3 + 0.2 * p.y]
+    };
+    let mut one = RenderScene::from_scene(&scene, Some(48.0)).expect("convert");
+    one.fill_lightmap(light);
+    let mut paged = RenderScene::from_scene_paged(&scene, Some(48.0), 64).expect("convert");
+    paged.fill_lightmap(light);
+    let lm = paged.lightmap.as_ref().expect("light map");
+    assert!(lm.pages > 1, "{} pages", lm.pages);
+    assert_eq!(one.lightmap.as_ref().expect("light map").pages, 1);
+    // Copies drawn as instances take their own pages too.
+    let pages_of_copies: std::collections::HashSet<u32> =
+        paged.instance_uvs.iter().map(|u| u.page).collect();
+    assert!(!pages_of_copies.is_empty());
+    let (w, h) = (96u32, 72u32);
+    let settings = FrameSettings {
+        debug_view: DebugView::LightMap,
+        ..FrameSettings::MINIMAL
+    };
+    let a = FrameRenderer::new(&gpu, &one)
+        .expect("one page")
+        .capture(&gpu, w, h, &settings)
+        .expect("capture")
+        .hdr;
+    let b = FrameRenderer::new(&gpu, &paged)
+        .expect("pages")
+        .capture(&gpu, w, h, &settings)
+        .expect("capture")
+        .hdr;
+    let lit = a.texels.iter().filter(|x| x[0] > 0.05).count();
+    assert!(lit > (w * h) as usize / 4, "{lit} lit pixels");
+    let differ = a
+        .texels
+        .iter()
+        .zip(&b.texels)
+        .filter(|(x, y)| (0..3).any(|c| (x[c] - y[c]).abs() > 0.02))
+        .count();
+    assert!(
+        differ <= (w * h) as usize / 100,
+        "{differ} of {} pixels differ",
+        w * h
+    );
+}

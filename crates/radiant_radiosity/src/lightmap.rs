@@ -1,5 +1,5 @@
-//! A bake's light map on the scene's atlas (`radiant_scene::atlas`: one chart per triangle, a
-//! surface's charts one block; the renderer draws the same atlas). Each texel holds the
+//! A bake's light map on the scene's atlas (`radiant_scene::atlas`: UV charts on one or more
+//! pages; the renderer draws the same atlas). Each texel holds the
 //! incident radiance `H` at its own point from the smooth field (`crate::smooth`), so a surface
 //! of albedo `a` reflects `a · H` (plus its emission); texels around each chart repeat its edge.
 //! Triangles left out of the bake (dynamic surfaces) stay 0.
@@ -10,13 +10,16 @@ use radiant_scene::atlas::Atlas;
 use crate::mesh::Mesh;
 use crate::smooth::SmoothField;
 
-/// A light map: linear RGB `H`, row-major, `width × height`.
+/// A light map: linear RGB `H`, `pages` pages of `width × height` texels, each row-major, one
+/// after the other.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LightMap {
-    /// Width in texels.
+    /// Width of a page in texels.
     pub width: u32,
-    /// Height in texels.
+    /// Height of a page in texels.
     pub height: u32,
+    /// Pages.
+    pub pages: u32,
     /// Texels (linear RGB incident radiance, emissive units); texels outside charts are 0.
     pub texels: Vec<[f32; 3]>,
 }
@@ -53,6 +56,7 @@ pub fn bake_lightmap(scene: &Scene, atlas: &Atlas, mesh: &Mesh, field: &SmoothFi
     LightMap {
         width: atlas.width,
         height: atlas.height,
+        pages: atlas.pages,
         texels,
     }
 }

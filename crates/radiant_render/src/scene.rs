@@ -26,10 +26,12 @@ pub struct Vertex {
     pub albedo: [f32; 3],
     /// Emitted radiance, linear, in the bake's units.
     pub emissive: [f32; 3],
-    /// Light-map coordinates (the second UV set), in [0, 1].
+    /// Light-map coordinates (the second UV set), in [0, 1] of its page.
     pub lightmap_uv: [f32; 2],
     /// Base-colour texture coordinates (the material's set, `KHR_texture_transform` applied).
     pub uv: [f32; 2],
+    /// The light-map page (a layer of the light-map texture array).
+    pub lightmap_page: u32,
 }
 
 /// The kind of a punctual light.
@@ -117,12 +119,27 @@ pub const MAX_LIGHTMAP_SIDE: u32 = radiant_scene::atlas::MAX_SIDE;
 /// surface of albedo `a` reflects radiance `a · H`), linear RGB.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LightMap {
-    /// Width in texels.
+    /// Width of a page in texels.
     pub width: u32,
-    /// Height in texels.
+    /// Height of a page in texels.
     pub height: u32,
-    /// Row-major texels, RGB.
+    /// Pages (layers of the texture array).
+    pub pages: u32,
+    /// Texels, RGB: each page row-major, one after the other.
     pub texels: Vec<[f32; 3]>,
+}
+
+/// A copy's light-map coordinate for one vertex of its prototype's draw (16 bytes, as the
+/// G-buffer's storage buffer reads it).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct InstanceUv {
+    /// Coordinates in the page.
+    pub uv: [f32; 2],
+    /// The page.
+    pub page: u32,
+    /// Unused.
+    pub pad: u32,
 }
 
 /// A light-map texel's place on the geometry, for [`RenderScene::fill_lightmap`].
@@ -162,7 +179,7 @@ pub struct RenderScene {
     pub instances: Vec<InstanceData>,
     /// The copies' light-map coordinates: for each copy, one per vertex of its prototype's draw,
     /// in that order (see [`InstanceData::lightmap`]).
-    pub instance_uvs: Vec<[f32; 2]>,
+    pub instance_uvs: Vec<InstanceUv>,
     /// What is seen where no geometry is (black without one).
     pub sky: Option<Sky>,
     /// The light map's layout, when [`RenderScene::from_scene`] made it.
@@ -188,7 +205,17 @@ impl RenderScene {
         scene: &radiant_scene::Scene,
         texel_density: Option<f64>,
     ) -> Result<Self, RenderError> {
-        Self::build(scene, texel_density, true)
+        Self::build(scene, texel_density, radiant_scene::atlas::MAX_SIDE, true)
+    }
+
+    /// [`RenderScene::from_scene`] with light-map pages of at most `page_side` texels a side
+    /// (`radiant_scene::atlas::Atlas::paged`): the light map becomes a texture array.
+    pub fn from_scene_paged(
+        scene: &radiant_scene::Scene,
+        texel_density: Option<f64>,
+        page_side: u32,
+    ) -> Result<Self, RenderError> {
+        Self::build(scene, texel_density, page_side, true)
     }
 
     /// [`RenderScene::from_scene`] without instances: every triangle drawn on its own (the
@@ -197,12 +224,13 @@ impl RenderScene {
         scene: &radiant_scene::Scene,
         texel_density: Option<f64>,
     ) -> Result<Self, RenderError> {
-        Self::build(scene, texel_density, false)
+        Self::build(scene, texel_density, radiant_scene::atlas::MAX_SIDE, false)
     }
 
     fn build(
         scene: &radiant_scene::Scene,
         texel_density: Option<f64>,
+        page_side: u32,
         instancing: bool,
     ) -> Result<Self, RenderError> {
         if scene.triangles.is_empty() {
@@ -235,8 +263,8 @@ impl RenderScene {
         for (i, t) in scene.triangles.iter().enumerate() {
             of_surface[t.surface as usize].push(i as u32);
         }
-        let atlas = radiant_scene::atlas::Atlas::new(scene, texel_density)?;
-        let (w, h) = (atlas.width, atlas.height);
+        let atlas = radiant_scene::atlas::Atlas::paged(scene, texel_density, page_side)?;
+        let (w, h, pages) = (atlas.width, atlas.height, atlas.pages);
         let mut vertices = Vec::with_capacity(scene.triangles.len() * 3);
         for (i, t) in scene.triangles.iter().enumerate() {
             let s = &scene.surfaces[t.surface as usize];
@@ -261,6 +289,7 @@ impl RenderScene {
                     emissive: s.emission.map(|x| x as f32),
                     lightmap_uv: uvs[k],
                     uv: uv.to_array(),
+                    lightmap_page: atlas.page[i],
                 });
             }
         }
@@ -326,7 +355,14 @@ impl RenderScene {
                 // pair with the prototype's in order).
                 let base = instance_uvs.len() as u32;
                 for &i in &of_surface[s as usize] {
-                    instance_uvs.extend((0..3).map(|k| vertices[i as usize * 3 + k].lightmap_uv));
+                    instance_uvs.extend((0..3).map(|k| {
+                        let v = &vertices[i as usize * 3 + k];
+                        InstanceUv {
+                            uv: v.lightmap_uv,
+                            page: v.lightmap_page,
+                            pad: 0,
+                        }
+                    }));
                 }
                 instances.push(InstanceData::new(rel, base));
             }
@@ -405,7 +441,8 @@ impl RenderScene {
             lightmap: Some(LightMap {
                 width: w,
                 height: h,
-                texels: vec![[0.0; 3]; (w * h) as usize],
+                pages,
+                texels: vec![[0.0; 3]; (w * h * pages) as usize],
             }),
         })
     }
@@ -418,28 +455,35 @@ impl RenderScene {
             return;
         };
         let (origin, vertices) = (self.origin, &self.vertices);
-        let charts = vertices.chunks_exact(3).enumerate().map(|(index, tri)| {
-            (
-                index,
-                [0, 1, 2].map(|k| Vec2::from(tri[k].lightmap_uv)),
-                [0, 1, 2].map(|k| origin + Vec3::from(tri[k].position).as_dvec3()),
-            )
-        });
-        radiant_scene::atlas::rasterize(
-            lm.width,
-            lm.height,
-            &mut lm.texels,
-            charts,
-            |index, u, v, position| {
-                h(&LightmapTexel {
-                    triangle: index,
-                    u,
-                    v,
-                    position,
-                    normal: face_normal(&vertices[index * 3..index * 3 + 3]),
-                })
-            },
-        );
+        let size = (lm.width as usize * lm.height as usize).max(1);
+        for (page, texels) in lm.texels.chunks_exact_mut(size).enumerate() {
+            let charts = vertices
+                .chunks_exact(3)
+                .enumerate()
+                .filter(|(_, tri)| tri[0].lightmap_page as usize == page)
+                .map(|(index, tri)| {
+                    (
+                        index,
+                        [0, 1, 2].map(|k| Vec2::from(tri[k].lightmap_uv)),
+                        [0, 1, 2].map(|k| origin + Vec3::from(tri[k].position).as_dvec3()),
+                    )
+                });
+            radiant_scene::atlas::rasterize(
+                lm.width,
+                lm.height,
+                texels,
+                charts,
+                |index, u, v, position| {
+                    h(&LightmapTexel {
+                        triangle: index,
+                        u,
+                        v,
+                        position,
+                        normal: face_normal(&vertices[index * 3..index * 3 + 3]),
+                    })
+                },
+            );
+        }
     }
 
     /// A smooth synthetic light map: the unoccluded irradiance from every emissive triangle,
@@ -609,7 +653,7 @@ pub struct GpuScene {
     pub lights: wgpu::Buffer,
     /// Number of real lights.
     pub light_count: u32,
-    /// The light map, Rgba16Float (1×1 black without one).
+    /// The light map, a Rgba16Float texture array of its pages (1×1 black without one).
     pub lightmap: wgpu::TextureView,
     /// Bilinear, clamped sampler.
     pub linear_sampler: wgpu::Sampler,
@@ -766,7 +810,11 @@ impl GpuScene {
                 }
             }
         }
-        if !scene.instance_uvs.iter().flatten().all(|x| x.is_finite()) {
+        if !scene
+            .instance_uvs
+            .iter()
+            .all(|u| u.uv.iter().all(|x| x.is_finite()))
+        {
             return Err(RenderError::NonFinite("instance light-map coordinates"));
         }
         let materials = cache.upload(
@@ -790,7 +838,7 @@ impl GpuScene {
             contents: bytemuck::cast_slice(&instance_data),
             usage: wgpu::BufferUsages::VERTEX,
         });
-        let no_uvs = [[0.0f32; 2]];
+        let no_uvs = [InstanceUv::default()];
         let instance_uvs = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("scene_instance_uvs"),
             contents: bytemuck::cast_slice(if scene.instance_uvs.is_empty() {
@@ -849,16 +897,19 @@ impl GpuScene {
             contents: bytemuck::cast_slice(&lights),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        let (lw, lh, data): (u32, u32, Vec<u16>) = match &scene.lightmap {
+        let (lw, lh, layers, data): (u32, u32, u32, Vec<u16>) = match &scene.lightmap {
             Some(lm)
                 if lm.width > 0
                     && lm.height > 0
-                    && lm.texels.len() as u64 == u64::from(lm.width) * u64::from(lm.height) =>
+                    && lm.pages > 0
+                    && lm.texels.len() as u64
+                        == u64::from(lm.width) * u64::from(lm.height) * u64::from(lm.pages) =>
             {
                 if lm.texels.iter().flatten().any(|x| !x.is_finite()) {
                     return Err(RenderError::NonFinite("light map"));
                 }
-                let max = gpu.device.limits().max_texture_dimension_2d;
+                let limits = gpu.device.limits();
+                let max = limits.max_texture_dimension_2d;
                 if lm.width > max || lm.height > max {
                     return Err(RenderError::InvalidSize {
                         width: lm.width,
@@ -866,9 +917,16 @@ impl GpuScene {
                         max,
                     });
                 }
+                if lm.pages > limits.max_texture_array_layers {
+                    return Err(RenderError::InvalidScene(format!(
+                        "a light map of {} pages, past the adapter's {} texture layers",
+                        lm.pages, limits.max_texture_array_layers
+                    )));
+                }
                 (
                     lm.width,
                     lm.height,
+                    lm.pages,
                     lm.texels
                         .iter()
                         .flat_map(|t| [t[0], t[1], t[2], 1.0].map(f32_to_f16))
@@ -876,9 +934,22 @@ impl GpuScene {
                 )
             }
             Some(_) => return Err(RenderError::NonFinite("light map size")),
-            None => (1, 1, vec![0; 4]),
+            None => (1, 1, 1, vec![0; 4]),
         };
-        let lightmap = rgba16f_texture(gpu, "scene_lightmap", lw, lh, &data);
+        if let Some(v) = scene.vertices.iter().find(|v| v.lightmap_page >= layers) {
+            return Err(RenderError::InvalidScene(format!(
+                "a vertex on light-map page {} of {layers}",
+                v.lightmap_page
+            )));
+        }
+        let lightmap = crate::util::sampled_texture_array(
+            dev,
+            &gpu.queue,
+            "scene_lightmap",
+            (lw, lh, layers),
+            wgpu::TextureFormat::Rgba16Float,
+            bytemuck::cast_slice(&data),
+        );
         let linear_sampler = dev.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("linear_clamp"),
             mag_filter: wgpu::FilterMode::Linear,
@@ -1103,7 +1174,7 @@ mod tests {
         assert_eq!(rs.instances[inst.first_instance as usize].lightmap[2], 0);
         let base = copy.lightmap[0] as usize;
         for k in 0..3 {
-            assert_eq!(rs.instance_uvs[base + k], rs.vertices[6 + k].lightmap_uv);
+            assert_eq!(rs.instance_uvs[base + k].uv, rs.vertices[6 + k].lightmap_uv);
             assert_ne!(rs.vertices[k].lightmap_uv, rs.vertices[6 + k].lightmap_uv);
         }
     }

@@ -179,28 +179,62 @@ pub fn sampled_texture(
     format: wgpu::TextureFormat,
     data: &[u8],
 ) -> wgpu::TextureView {
-    use wgpu::util::DeviceExt as _;
-    device
-        .create_texture_with_data(
-            queue,
-            &wgpu::TextureDescriptor {
-                label: Some(label),
-                size: wgpu::Extent3d {
-                    width,
-                    height,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: mips,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format,
-                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                view_formats: &[],
-            },
-            wgpu::util::TextureDataOrder::LayerMajor,
-            data,
-        )
+    texture_with_data(device, queue, label, (width, height, 1, mips), format, data)
         .create_view(&Default::default())
+}
+
+/// [`sampled_texture`] with `layers` layers of one mip each (`data` layer after layer), viewed
+/// as a 2D array.
+pub fn sampled_texture_array(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    (width, height, layers): (u32, u32, u32),
+    format: wgpu::TextureFormat,
+    data: &[u8],
+) -> wgpu::TextureView {
+    texture_with_data(
+        device,
+        queue,
+        label,
+        (width, height, layers, 1),
+        format,
+        data,
+    )
+    .create_view(&wgpu::TextureViewDescriptor {
+        dimension: Some(wgpu::TextureViewDimension::D2Array),
+        ..Default::default()
+    })
+}
+
+fn texture_with_data(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    label: &str,
+    (width, height, layers, mips): (u32, u32, u32, u32),
+    format: wgpu::TextureFormat,
+    data: &[u8],
+) -> wgpu::Texture {
+    use wgpu::util::DeviceExt as _;
+    device.create_texture_with_data(
+        queue,
+        &wgpu::TextureDescriptor {
+            label: Some(label),
+            size: wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: layers,
+            },
+            mip_level_count: mips,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        },
+        wgpu::util::TextureDataOrder::LayerMajor,
+        data,
+    )
 }
 
 /// A 2D texture to render a frame into (and copy out of): mip 0 only, one sample.

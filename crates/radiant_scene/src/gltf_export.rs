@@ -8,11 +8,12 @@
 //! texture, emission, alpha mode). Double-sided surfaces are written as their two sides, each
 //! with its own light (`doubleSided` false). Base-colour images are written again as PNG.
 //!
-//! The light map is one PNG image, sRGB-encoded 8-bit: a texel `t` (in [0, 1] per channel)
-//! stands for the incident radiance `H = scale · srgb_to_linear(t)`, so a surface of base colour
-//! `a` reflects `a · H` (glTF emissive units). Each baked primitive names it in its `extras`:
-//! `{"lightmap": {"texture": T, "texCoord": 1, "scale": S, "encoding": "srgb"}}`, `T` the index
-//! into `textures`. Punctual lights are not written: their light is in the light map.
+//! The light map is one PNG image per page, sRGB-encoded 8-bit: a texel `t` (in [0, 1] per
+//! channel) stands for the incident radiance `H = scale · srgb_to_linear(t)`, so a surface of
+//! base colour `a` reflects `a · H` (glTF emissive units). A surface whose charts lie on several
+//! pages is one mesh with a primitive per page. Each baked primitive names its page in its
+//! `extras`: `{"lightmap": {"texture": T, "texCoord": 1, "scale": S, "encoding": "srgb"}}`, `T`
+//! the index into `textures`. Punctual lights are not written: their light is in the light map.
 
 use std::path::Path;
 
@@ -23,8 +24,8 @@ use gltf::json::validation::{Checked, USize64};
 use crate::atlas::Atlas;
 use crate::{AlphaMode, Scene, SceneError};
 
-/// A light map to write: texels (`atlas.width × atlas.height`, linear RGB `H`, row-major) on
-/// `atlas`.
+/// A light map to write: texels (`atlas.pages` pages of `atlas.width × atlas.height`, linear RGB
+/// `H`, each row-major, one after the other) on `atlas`.
 pub struct LightmapExport<'a> {
     /// The atlas the texels are on (its `uv` become TEXCOORD_1).
     pub atlas: &'a Atlas,
@@ -33,12 +34,12 @@ pub struct LightmapExport<'a> {
 }
 
 /// Where the light map went in the file.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ExportReport {
     /// Primitives written.
     pub primitives: usize,
-    /// Index of the light map in `textures`, if one was written.
-    pub lightmap_texture: Option<usize>,
+    /// Indices of the light map's pages in `textures` (empty without a light map).
+    pub lightmap_textures: Vec<usize>,
     /// The light map's scale (`H = scale · srgb_to_linear(texel)`).
     pub lightmap_scale: f32,
     /// Bytes written.
@@ -58,7 +59,9 @@ pub fn export_gltf(
 ) -> Result<ExportReport, SceneError> {
     if let Some(lm) = &lightmap
         && (lm.atlas.uv.len() != scene.triangles.len()
-            || lm.texels.len() != lm.atlas.width as usize * lm.atlas.height as usize)
+            || lm.atlas.page.len() != scene.triangles.len()
+            || lm.texels.len()
+                != lm.atlas.width as usize * lm.atlas.height as usize * lm.atlas.pages as usize)
     {
         return Err(err("the light map does not match the scene's atlas"));
     }
@@ -96,23 +99,33 @@ pub fn export_gltf(
     } else {
         DVec3::ZERO
     };
-    let lightmap_texture = match &lightmap {
-        Some(lm) => {
-            let peak = lm
-                .texels
-                .iter()
-                .flatten()
-                .copied()
-                .filter(|x| x.is_finite())
-                .fold(0.0f32, f32::max);
-            let scale = if peak > 0.0 { peak } else { 1.0 };
-            let rgb: Vec<u8> = lm
-                .texels
+    // The light map's pages, one texture each, with one scale.
+    let mut page_textures = Vec::new();
+    let mut lightmap_scale = 0.0f32;
+    if let Some(lm) = &lightmap {
+        let peak = lm
+            .texels
+            .iter()
+            .flatten()
+            .copied()
+            .filter(|x| x.is_finite())
+            .fold(0.0f32, f32::max);
+        lightmap_scale = if peak > 0.0 { peak } else { 1.0 };
+        let sampler = root.push(json::texture::Sampler {
+            mag_filter: Some(Checked::Valid(json::texture::MagFilter::Linear)),
+            min_filter: Some(Checked::Valid(json::texture::MinFilter::Linear)),
+            wrap_s: Checked::Valid(json::texture::WrappingMode::ClampToEdge),
+            wrap_t: Checked::Valid(json::texture::WrappingMode::ClampToEdge),
+            ..Default::default()
+        });
+        let size = lm.atlas.width as usize * lm.atlas.height as usize;
+        for (p, page) in lm.texels.chunks_exact(size.max(1)).enumerate() {
+            let rgb: Vec<u8> = page
                 .iter()
                 .flatten()
                 .map(|&x| {
                     let x = if x.is_finite() {
-                        (x / scale).clamp(0.0, 1.0)
+                        (x / lightmap_scale).clamp(0.0, 1.0)
                     } else {
                         0.0
                     };
@@ -125,25 +138,21 @@ pub fn export_gltf(
                 image::ColorType::Rgb8,
                 &rgb,
             )?;
-            let image = w.image(&mut root, png, "lightmap");
-            let sampler = root.push(json::texture::Sampler {
-                mag_filter: Some(Checked::Valid(json::texture::MagFilter::Linear)),
-                min_filter: Some(Checked::Valid(json::texture::MinFilter::Linear)),
-                wrap_s: Checked::Valid(json::texture::WrappingMode::ClampToEdge),
-                wrap_t: Checked::Valid(json::texture::WrappingMode::ClampToEdge),
-                ..Default::default()
-            });
-            let texture = root.push(json::Texture {
-                name: Some("lightmap".into()),
+            let name = if lm.atlas.pages > 1 {
+                format!("lightmap_{p}")
+            } else {
+                "lightmap".to_string()
+            };
+            let image = w.image(&mut root, png, &name);
+            page_textures.push(root.push(json::Texture {
+                name: Some(name),
                 sampler: Some(sampler),
                 source: image,
                 extensions: None,
                 extras: Default::default(),
-            });
-            Some((texture, scale))
+            }));
         }
-        None => None,
-    };
+    }
     let mut nodes = Vec::new();
     let mut primitives = 0;
     for (s, surface) in scene.surfaces.iter().enumerate() {
@@ -252,87 +261,42 @@ pub fn export_gltf(
             }),
             ..Default::default()
         });
-        // Vertex data, three vertices per triangle.
-        let mut pos = Vec::with_capacity(tris.len() * 9);
-        let mut nrm = Vec::with_capacity(tris.len() * 9);
-        let mut uv0 = Vec::with_capacity(tris.len() * 6);
-        let mut uv1 = Vec::with_capacity(tris.len() * 6);
-        for &i in &tris {
-            let t = &scene.triangles[i];
-            let face = t.cross().normalize_or(DVec3::Z).as_vec3();
-            for k in 0..3 {
-                pos.extend((t.vertices[k] - origin).as_vec3().to_array());
-                let n = t.normals[k];
-                let n = if n.is_finite() && n.length_squared() > 0.5 {
-                    n.normalize()
-                } else {
-                    face
-                };
-                nrm.extend(n.to_array());
-                // TEXCOORD_0: the base colour's coordinates (transformed), or the scene's own
-                // first set (glTF wants TEXCOORD_0 wherever TEXCOORD_1 is).
-                let uv = match tex {
-                    Some(tex) => tex.uv([t.uv[0][k], t.uv[1][k]]),
-                    None => t.uv[0][k],
-                };
-                let uv = if uv.is_finite() { uv } else { Vec2::ZERO };
-                uv0.extend(uv.to_array());
-                if let Some(lm) = &lightmap {
-                    uv1.extend(lm.atlas.uv[i][k].to_array());
-                }
-            }
+        // One primitive per light-map page the surface's charts are on (one without a map).
+        let page_of = |i: usize| lightmap.as_ref().map_or(0, |lm| lm.atlas.page[i]);
+        let mut pages: Vec<u32> = tris.iter().map(|&i| page_of(i)).collect();
+        pages.sort_unstable();
+        pages.dedup();
+        let mut prims = Vec::with_capacity(pages.len());
+        for page in pages {
+            let tris: Vec<usize> = tris
+                .iter()
+                .copied()
+                .filter(|&i| page_of(i) == page)
+                .collect();
+            prims.push(primitive(
+                &mut w,
+                &mut root,
+                scene,
+                &tris,
+                Vertices {
+                    origin,
+                    tex,
+                    uv1: lightmap.as_ref().map(|lm| &lm.atlas.uv[..]),
+                },
+                material,
+                page_textures
+                    .get(page as usize)
+                    .map(|&t| (t, lightmap_scale)),
+            )?);
         }
-        let count = tris.len() * 3;
-        let mut attributes = std::collections::BTreeMap::new();
-        attributes.insert(
-            Checked::Valid(json::mesh::Semantic::Positions),
-            w.accessor(&mut root, &pos, count, json::accessor::Type::Vec3, true),
-        );
-        attributes.insert(
-            Checked::Valid(json::mesh::Semantic::Normals),
-            w.accessor(&mut root, &nrm, count, json::accessor::Type::Vec3, false),
-        );
-        if !uv0.is_empty() {
-            attributes.insert(
-                Checked::Valid(json::mesh::Semantic::TexCoords(0)),
-                w.accessor(&mut root, &uv0, count, json::accessor::Type::Vec2, false),
-            );
-        }
-        let mut extras = Default::default();
-        if !uv1.is_empty() {
-            attributes.insert(
-                Checked::Valid(json::mesh::Semantic::TexCoords(1)),
-                w.accessor(&mut root, &uv1, count, json::accessor::Type::Vec2, false),
-            );
-            if let Some((texture, scale)) = lightmap_texture {
-                let e = serde_json::json!({ "lightmap": {
-                    "texture": texture.value(),
-                    "texCoord": 1,
-                    "scale": scale,
-                    "encoding": "srgb",
-                }});
-                extras = Some(
-                    serde_json::value::RawValue::from_string(e.to_string())
-                        .map_err(|e| err(format!("extras: {e}")))?,
-                );
-            }
-        }
+        primitives += prims.len();
         let mesh = root.push(json::Mesh {
             name: Some(surface.name.clone()),
-            primitives: vec![json::mesh::Primitive {
-                attributes,
-                extensions: None,
-                extras,
-                indices: None,
-                material: Some(material),
-                mode: Checked::Valid(json::mesh::Mode::Triangles),
-                targets: None,
-            }],
+            primitives: prims,
             weights: None,
             extensions: None,
             extras: Default::default(),
         });
-        primitives += 1;
         nodes.push(root.push(json::Node {
             name: Some(surface.name.clone()),
             mesh: Some(mesh),
@@ -355,9 +319,106 @@ pub fn export_gltf(
     write_atomic(path, &bytes)?;
     Ok(ExportReport {
         primitives,
-        lightmap_texture: lightmap_texture.map(|(t, _)| t.value()),
-        lightmap_scale: lightmap_texture.map_or(0.0, |(_, s)| s),
+        lightmap_textures: page_textures.iter().map(|t| t.value()).collect(),
+        lightmap_scale,
         bytes: bytes.len(),
+    })
+}
+
+/// What a primitive's vertices need besides its triangles.
+struct Vertices<'a> {
+    /// Subtracted from positions (the node's translation adds it back).
+    origin: DVec3,
+    /// The base-colour texture, whose transform TEXCOORD_0 gets.
+    tex: Option<crate::TextureRef>,
+    /// Per scene triangle, its light-map coordinates (TEXCOORD_1), if there is a light map.
+    uv1: Option<&'a [[Vec2; 3]]>,
+}
+
+/// One primitive of scene triangles `tris` (three vertices each) with `material`, naming
+/// `lightmap` (its page's texture and scale) in its extras.
+fn primitive(
+    w: &mut Writer,
+    root: &mut json::Root,
+    scene: &Scene,
+    tris: &[usize],
+    v: Vertices<'_>,
+    material: json::Index<json::Material>,
+    lightmap: Option<(json::Index<json::Texture>, f32)>,
+) -> Result<json::mesh::Primitive, SceneError> {
+    let (origin, tex) = (v.origin, v.tex);
+    let mut pos = Vec::with_capacity(tris.len() * 9);
+    let mut nrm = Vec::with_capacity(tris.len() * 9);
+    let mut uv0 = Vec::with_capacity(tris.len() * 6);
+    let mut uv1 = Vec::with_capacity(tris.len() * 6);
+    for &i in tris {
+        let t = &scene.triangles[i];
+        let face = t.cross().normalize_or(DVec3::Z).as_vec3();
+        for k in 0..3 {
+            pos.extend((t.vertices[k] - origin).as_vec3().to_array());
+            let n = t.normals[k];
+            let n = if n.is_finite() && n.length_squared() > 0.5 {
+                n.normalize()
+            } else {
+                face
+            };
+            nrm.extend(n.to_array());
+            // TEXCOORD_0: the base colour's coordinates (transformed), or the scene's own
+            // first set (glTF wants TEXCOORD_0 wherever TEXCOORD_1 is).
+            let uv = match tex {
+                Some(tex) => tex.uv([t.uv[0][k], t.uv[1][k]]),
+                None => t.uv[0][k],
+            };
+            let uv = if uv.is_finite() { uv } else { Vec2::ZERO };
+            uv0.extend(uv.to_array());
+            if let Some(atlas_uv) = v.uv1 {
+                uv1.extend(atlas_uv[i][k].to_array());
+            }
+        }
+    }
+    let count = tris.len() * 3;
+    let mut attributes = std::collections::BTreeMap::new();
+    attributes.insert(
+        Checked::Valid(json::mesh::Semantic::Positions),
+        w.accessor(root, &pos, count, json::accessor::Type::Vec3, true),
+    );
+    attributes.insert(
+        Checked::Valid(json::mesh::Semantic::Normals),
+        w.accessor(root, &nrm, count, json::accessor::Type::Vec3, false),
+    );
+    if !uv0.is_empty() {
+        attributes.insert(
+            Checked::Valid(json::mesh::Semantic::TexCoords(0)),
+            w.accessor(root, &uv0, count, json::accessor::Type::Vec2, false),
+        );
+    }
+    let mut extras = Default::default();
+    if !uv1.is_empty() {
+        attributes.insert(
+            Checked::Valid(json::mesh::Semantic::TexCoords(1)),
+            w.accessor(root, &uv1, count, json::accessor::Type::Vec2, false),
+        );
+        if let Some((texture, scale)) = lightmap {
+            let e = serde_json::json!({ "lightmap": {
+                "texture": texture.value(),
+                "texCoord": 1,
+                "scale": scale,
+                "encoding": "srgb",
+            }});
+            extras = Some(
+                serde_json::value::RawValue::from_string(e.to_string())
+                    .map_err(|e| err(format!("extras: {e}")))?,
+            );
+        }
+    }
+    Ok(json::mesh::Primitive {
+        attributes,
+        extensions: None,
+        extras,
+        indices: None,
+        material: Some(material),
+        mode: Checked::Valid(json::mesh::Mode::Triangles),
+        targets: None,
     })
 }
 
@@ -606,7 +667,8 @@ mod tests {
         }
         // The light map, named in every primitive's extras, decodes to its texels.
         let (doc, _buffers, images) = gltf::import_slice(&bytes).expect("gltf");
-        let t = r.lightmap_texture.expect("a light map texture");
+        assert_eq!(r.lightmap_textures.len(), 1);
+        let t = r.lightmap_textures[0];
         for mesh in doc.meshes() {
             let p = mesh.primitives().next().expect("one primitive");
             let extras: serde_json::Value =
@@ -630,6 +692,56 @@ mod tests {
                     "texel {i}: {got} vs {want:?}"
                 );
             }
+        }
+        // A light map of several pages: one image each, and a primitive per page a surface's
+        // charts are on, naming that page (the box as one surface: charts on every page).
+        let mut scene = scene;
+        for t in &mut scene.triangles {
+            t.surface = 0;
+        }
+        let paged = Atlas::paged(&scene, Some(150.0), 128).expect("atlas");
+        assert!(paged.pages > 1);
+        let size = (paged.width * paged.height) as usize;
+        let texels: Vec<[f32; 3]> = (0..size * paged.pages as usize)
+            .map(|i| [(i / size) as f32 + 1.0; 3])
+            .collect();
+        let path = dir.join("paged.glb");
+        let lm = LightmapExport {
+            atlas: &paged,
+            texels: &texels,
+        };
+        let r = export_gltf(&scene, Some(lm), &path).expect("export");
+        assert_eq!(r.lightmap_textures.len(), paged.pages as usize);
+        let split: usize = (0..scene.surfaces.len())
+            .map(|s| {
+                let mut p: Vec<u32> = (0..scene.triangles.len())
+                    .filter(|&i| scene.triangles[i].surface as usize == s)
+                    .map(|i| paged.page[i])
+                    .collect();
+                p.sort_unstable();
+                p.dedup();
+                p.len()
+            })
+            .sum();
+        assert_eq!(split, paged.pages as usize, "one surface on every page");
+        assert_eq!(r.primitives, split);
+        let bytes = std::fs::read(&path).expect("read back");
+        let (doc, _buffers, images) = gltf::import_slice(&bytes).expect("gltf");
+        for p in doc
+            .meshes()
+            .flat_map(|m| m.primitives().collect::<Vec<_>>())
+        {
+            let extras: serde_json::Value =
+                serde_json::from_str(p.extras().as_ref().expect("extras").get()).expect("json");
+            let t = extras["lightmap"]["texture"].as_u64().expect("texture") as usize;
+            assert!(r.lightmap_textures.contains(&t));
+        }
+        for (page, &t) in r.lightmap_textures.iter().enumerate() {
+            let img = &images[doc.textures().nth(t).expect("texture").source().index()];
+            assert_eq!((img.width, img.height), (paged.width, paged.height));
+            let got = r.lightmap_scale as f64
+                * radiant_color::srgb_to_linear(f64::from(img.pixels[0]) / 255.0);
+            assert!((got - (page as f64 + 1.0)).abs() < 0.02 * r.lightmap_scale as f64);
         }
         // A name other engines would not read as binary glTF is refused.
         assert!(matches!(

@@ -7,10 +7,15 @@
 // without one) multiplies the vertex albedo, and alpha below the cut-off is discarded.
 
 @group(0) @binding(0) var<uniform> camera: Camera;
-@group(0) @binding(1) var lightmap: texture_2d<f32>;
+@group(0) @binding(1) var lightmap: texture_2d_array<f32>;
 @group(0) @binding(2) var lightmap_sampler: sampler;
-// Copies' own light-map coordinates, in their prototype's vertex order.
-@group(0) @binding(3) var<storage, read> instance_uvs: array<vec2<f32>>;
+// Copies' own light-map coordinates and pages, in their prototype's vertex order.
+struct InstanceUv {
+    uv: vec2<f32>,
+    page: u32,
+    _pad: u32,
+};
+@group(0) @binding(3) var<storage, read> instance_uvs: array<InstanceUv>;
 @group(1) @binding(0) var base_color: texture_2d<f32>;
 @group(1) @binding(1) var base_color_sampler: sampler;
 @group(1) @binding(2) var<uniform> material: Material;
@@ -30,6 +35,7 @@ struct VertexIn {
     @location(3) emissive: vec3<f32>,
     @location(4) lightmap_uv: vec2<f32>,
     @location(5) uv: vec2<f32>,
+    @location(13) lightmap_page: u32,
 };
 
 // Per instance: rows of the model matrix, rows of the normal matrix, and where its light-map
@@ -51,6 +57,7 @@ struct VertexOut {
     @location(2) emissive: vec3<f32>,
     @location(3) lightmap_uv: vec2<f32>,
     @location(4) uv: vec2<f32>,
+    @location(5) @interpolate(flat) lightmap_page: u32,
 };
 
 @vertex
@@ -63,8 +70,11 @@ fn gbuffer_vs(v: VertexIn, inst: InstanceIn, @builtin(vertex_index) index: u32) 
     out.albedo = v.albedo;
     out.emissive = v.emissive;
     out.lightmap_uv = v.lightmap_uv;
+    out.lightmap_page = v.lightmap_page;
     if (inst.lightmap.z != 0u) {
-        out.lightmap_uv = instance_uvs[inst.lightmap.x + index - inst.lightmap.y];
+        let own = instance_uvs[inst.lightmap.x + index - inst.lightmap.y];
+        out.lightmap_uv = own.uv;
+        out.lightmap_page = own.page;
     }
     out.uv = v.uv;
     return out;
@@ -98,7 +108,7 @@ fn gbuffer_fs(in: VertexOut, @builtin(front_facing) front: bool) -> GBufferOut {
     out.normal = oct_encode(n);
     // r: roughness (Lambertian: 1), g: light-map coverage (every surface has a chart: 1).
     out.material = vec2<f32>(1.0, 1.0);
-    out.irradiance = vec4<f32>(textureSampleLevel(lightmap, lightmap_sampler, in.lightmap_uv, 0.0).rgb, 1.0);
+    out.irradiance = vec4<f32>(textureSampleLevel(lightmap, lightmap_sampler, in.lightmap_uv, in.lightmap_page, 0.0).rgb, 1.0);
     out.emissive = vec4<f32>(in.emissive, 1.0);
     return out;
 }

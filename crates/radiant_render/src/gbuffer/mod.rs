@@ -56,7 +56,16 @@ impl GBufferPipeline {
             label: Some("gbuffer_layout"),
             entries: &[
                 crate::util::uniform_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT),
-                crate::util::texture_entry(1, wgpu::TextureSampleType::Float { filterable: true }),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
                 wgpu::BindGroupLayoutEntry {
                     binding: 2,
                     visibility: wgpu::ShaderStages::FRAGMENT,
@@ -86,7 +95,7 @@ impl GBufferPipeline {
         });
         let attributes = wgpu::vertex_attr_array![
             0 => Float32x3, 1 => Float32x3, 2 => Float32x3, 3 => Float32x3, 4 => Float32x2,
-            5 => Float32x2
+            5 => Float32x2, 13 => Uint32
         ];
         let instance_attributes = wgpu::vertex_attr_array![
             6 => Float32x4, 7 => Float32x4, 8 => Float32x4,
