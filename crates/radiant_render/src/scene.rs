@@ -199,8 +199,8 @@ impl RenderScene {
     ///
     /// The light map is the scene's atlas (`radiant_scene::atlas`: its TEXCOORD_1, or charts
     /// generated at `texel_density` texels per scene unit, `None` for the automatic density).
-    /// Surfaces that copy another under an affine map and share its chart layout
-    /// ([`crate::instancing`]) are drawn as its instances.
+    /// Surfaces that copy another under an affine map ([`crate::instancing`]) are drawn as its
+    /// instances, each with its own light-map charts.
     pub fn from_scene(
         scene: &radiant_scene::Scene,
         texel_density: Option<f64>,

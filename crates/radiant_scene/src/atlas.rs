@@ -6,8 +6,9 @@
 //! charts (faces grown within a normal cone), flattened (least-squares conformal maps, split
 //! where they fold or stretch) and packed with the others at the texel density, one texel of
 //! padding around each chart: into one page when it fits the page side (cropped to what the
-//! charts use), else into as many square pages of that side as they need. Surfaces with a TEXCOORD_1 of their own (that
-//! overlapped or missed elsewhere) keep its islands as charts, repacked. Every surface has
+//! charts use), else into as many square pages of that side as they need. Surfaces with a
+//! TEXCOORD_1 of their own (that overlapped or missed elsewhere) keep its islands as charts,
+//! repacked. Every surface has
 //! charts of its own, copies of one mesh too: each gets its own light.
 //!
 //! The CLI's light map and the renderer's are this one atlas; `rasterize` fills either,
@@ -20,9 +21,9 @@ use glam::{DVec3, Vec2};
 
 use crate::Scene;
 
-/// The largest page side [`Atlas::new`] makes (the WebGPU minimum of
-/// `max_texture_dimension_2d`): a scene whose charts do not fit at the asked density gets a
-/// lower one.
+/// The largest page side (the WebGPU minimum of `max_texture_dimension_2d`), and the measure of
+/// the texel budget: a density whose charts would take more than 0.6 × `MAX_SIDE`² texels is
+/// lowered to that.
 pub const MAX_SIDE: u32 = 8192;
 
 /// The most texels inside charts an automatic density aims at (about 8 M: Sponza gets
@@ -52,7 +53,7 @@ pub struct Atlas {
     /// Per triangle, the page its chart is on.
     pub page: Vec<u32>,
     /// The texel density it was made for, texels per scene unit (lower than asked where the
-    /// charts would not fit a [`MAX_SIDE`] page).
+    /// charts would pass the [`MAX_SIDE`] budget, or one would not fit a page).
     pub density: f64,
     /// Charts (generated atlases; 0 for authored ones).
     pub charts: u32,
@@ -71,8 +72,8 @@ pub enum AtlasError {
     /// The scene has no triangle with area.
     #[error("the scene has no surface area to give a light map")]
     NoArea,
-    /// The charts do not fit a page at any density tried.
-    #[error("the light map needs {width} × {height} texels, more than {MAX_SIDE} a side")]
+    /// The charts fit neither one page nor pages of the side at any density tried.
+    #[error("the light map's charts need {width} × {height} texels and do not fit its pages")]
     TooLarge {
         /// Width it would need.
         width: u32,
