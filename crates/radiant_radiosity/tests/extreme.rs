@@ -214,6 +214,10 @@ fn cornell_box_is_the_same_at_any_scale_and_place() {
     let scene = radiant_scene::builtin("cornell-box").expect("builtin");
     let mut p = BakeParams::default();
     p.mesh.patch_size = 0.3;
+    // Solved far below the comparison's 1e-3: the solver stops at step boundaries set by wall
+    // time, so at the default tolerance two bakes of one system can differ by more than 1e-3
+    // on a dark face when the machine is loaded (seen once in a loaded test run: 0.16 %).
+    p.solver_params.tolerance = 1e-8;
     let base = common::bake(&scene, &p);
     for (scale, offset) in [
         (1e-4, DVec3::new(1e5, -2e5, 3e5)),
