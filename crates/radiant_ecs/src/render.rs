@@ -95,6 +95,8 @@ pub struct RenderState {
     pub timings: Option<radiant_render::graph::PassTimings>,
     /// The light map's atlas as last uploaded.
     pub atlas: Option<AtlasReport>,
+    /// That atlas and the density it was made at, reused while the geometry stays the same.
+    last_atlas: Option<(Option<f64>, radiant_scene::atlas::Atlas)>,
     pending_overlay: Option<Option<Arc<dyn radiant_post::overlay::Overlay>>>,
 }
 
@@ -260,7 +262,28 @@ fn build_scene(
         return Ok(None);
     }
     let lit = world.resource::<BakedLighting>().clone();
-    let mut rs = RenderScene::from_scene(&scene, settings.texel_density)?;
+    // A new light (or a material) on the same triangles keeps the atlas: its UV charts are the
+    // expensive part of the render scene on a level.
+    let state = world.resource::<RenderState>();
+    let reuse = match (&state.last_atlas, &state.scene) {
+        (Some((density, atlas)), Some(old))
+            if *density == settings.texel_density
+                && old.triangles == scene.triangles
+                && old.surfaces.len() == scene.surfaces.len()
+                && old
+                    .surfaces
+                    .iter()
+                    .zip(&scene.surfaces)
+                    .all(|(a, b)| a.tex_coords == b.tex_coords) =>
+        {
+            Some(atlas.clone())
+        }
+        _ => None,
+    };
+    let mut rs = match reuse {
+        Some(atlas) => RenderScene::with_atlas(&scene, atlas)?,
+        None => RenderScene::from_scene(&scene, settings.texel_density)?,
+    };
     if let (Some(mesh), Some(field)) = (&lit.mesh, &lit.field)
         && !lit.radiosity.is_empty()
     {
@@ -278,6 +301,7 @@ fn build_scene(
     let mut state = world.resource_mut::<RenderState>();
     state.scene = Some(Arc::new(scene));
     state.atlas = atlas;
+    state.last_atlas = rs.atlas.clone().map(|a| (settings.texel_density, a));
     Ok(Some(rs))
 }
 

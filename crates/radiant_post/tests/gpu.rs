@@ -575,6 +575,21 @@ fn bad_input_is_a_typed_error() {
         FrameRenderer::new(&gpu, &bad),
         Err(RenderError::IndexOutOfRange { .. })
     ));
+    // A light-map page past the map's pages.
+    let mut bad = cornell();
+    bad.vertices[0].lightmap_page = 3;
+    assert!(matches!(
+        FrameRenderer::new(&gpu, &bad),
+        Err(RenderError::InvalidScene(_))
+    ));
+    // An atlas made for other triangles.
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    let mut atlas = radiant_scene::atlas::Atlas::new(&scene, None).expect("atlas");
+    atlas.uv.pop();
+    assert!(matches!(
+        RenderScene::with_atlas(&scene, atlas),
+        Err(RenderError::InvalidScene(_))
+    ));
 }
 
 #[test]

@@ -205,7 +205,24 @@ impl RenderScene {
         scene: &radiant_scene::Scene,
         texel_density: Option<f64>,
     ) -> Result<Self, RenderError> {
-        Self::build(scene, texel_density, radiant_scene::atlas::MAX_SIDE, true)
+        let atlas = radiant_scene::atlas::Atlas::new(scene, texel_density)?;
+        Self::build(scene, atlas, true)
+    }
+
+    /// [`RenderScene::from_scene`] on an atlas made before for the same triangles (UV charts
+    /// cost about a second on a level: a new light on unchanged geometry need not pay it again).
+    pub fn with_atlas(
+        scene: &radiant_scene::Scene,
+        atlas: radiant_scene::atlas::Atlas,
+    ) -> Result<Self, RenderError> {
+        if atlas.uv.len() != scene.triangles.len() || atlas.page.len() != scene.triangles.len() {
+            return Err(RenderError::InvalidScene(format!(
+                "an atlas of {} triangles for a scene of {}",
+                atlas.uv.len(),
+                scene.triangles.len()
+            )));
+        }
+        Self::build(scene, atlas, true)
     }
 
     /// [`RenderScene::from_scene`] with light-map pages of at most `page_side` texels a side
@@ -215,7 +232,8 @@ impl RenderScene {
         texel_density: Option<f64>,
         page_side: u32,
     ) -> Result<Self, RenderError> {
-        Self::build(scene, texel_density, page_side, true)
+        let atlas = radiant_scene::atlas::Atlas::paged(scene, texel_density, page_side)?;
+        Self::build(scene, atlas, true)
     }
 
     /// [`RenderScene::from_scene`] without instances: every triangle drawn on its own (the
@@ -224,13 +242,13 @@ impl RenderScene {
         scene: &radiant_scene::Scene,
         texel_density: Option<f64>,
     ) -> Result<Self, RenderError> {
-        Self::build(scene, texel_density, radiant_scene::atlas::MAX_SIDE, false)
+        let atlas = radiant_scene::atlas::Atlas::new(scene, texel_density)?;
+        Self::build(scene, atlas, false)
     }
 
     fn build(
         scene: &radiant_scene::Scene,
-        texel_density: Option<f64>,
-        page_side: u32,
+        atlas: radiant_scene::atlas::Atlas,
         instancing: bool,
     ) -> Result<Self, RenderError> {
         if scene.triangles.is_empty() {
@@ -263,7 +281,6 @@ impl RenderScene {
         for (i, t) in scene.triangles.iter().enumerate() {
             of_surface[t.surface as usize].push(i as u32);
         }
-        let atlas = radiant_scene::atlas::Atlas::paged(scene, texel_density, page_side)?;
         let (w, h, pages) = (atlas.width, atlas.height, atlas.pages);
         let mut vertices = Vec::with_capacity(scene.triangles.len() * 3);
         for (i, t) in scene.triangles.iter().enumerate() {
@@ -936,10 +953,15 @@ impl GpuScene {
             Some(_) => return Err(RenderError::NonFinite("light map size")),
             None => (1, 1, 1, vec![0; 4]),
         };
-        if let Some(v) = scene.vertices.iter().find(|v| v.lightmap_page >= layers) {
+        let page = scene
+            .vertices
+            .iter()
+            .map(|v| v.lightmap_page)
+            .chain(scene.instance_uvs.iter().map(|u| u.page))
+            .find(|&p| p >= layers);
+        if let Some(p) = page {
             return Err(RenderError::InvalidScene(format!(
-                "a vertex on light-map page {} of {layers}",
-                v.lightmap_page
+                "a vertex on light-map page {p} of {layers}"
             )));
         }
         let lightmap = crate::util::sampled_texture_array(
