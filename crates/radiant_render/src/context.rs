@@ -37,7 +37,8 @@ pub struct GpuContext {
     pub queue: wgpu::Queue,
     /// Name, backend and driver of the adapter.
     pub info: wgpu::AdapterInfo,
-    /// Features enabled on the device (timestamp queries when the adapter has them).
+    /// Features enabled on the device (timestamp queries, clip distances and filtered f32 textures
+    /// when the adapter has them).
     pub features: wgpu::Features,
     errors: Arc<Mutex<Vec<String>>>,
 }
@@ -72,9 +73,13 @@ impl GpuContext {
     ) -> Result<Self, RenderError> {
         let adapter = choose_adapter(&instance, surface).await?;
         let info = adapter.get_info();
+        // Clip distances and filtered f32 textures: the GPU hemicube gather (`radiant_gather`)
+        // clips each face to its cell and samples an f32 light map.
         let wanted = wgpu::Features::TIMESTAMP_QUERY
             | wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS
-            | wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES;
+            | wgpu::Features::TIMESTAMP_QUERY_INSIDE_PASSES
+            | wgpu::Features::CLIP_DISTANCES
+            | wgpu::Features::FLOAT32_FILTERABLE;
         let features = adapter.features() & wanted;
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {

@@ -452,8 +452,62 @@ pub fn rasterize(
     if texels.len() as u64 != u64::from(width) * u64::from(height) {
         return;
     }
+    visit_filled(width, height, charts, |t| {
+        texels[(t.y * width + t.x) as usize] = eval(t.triangle as usize, t.u, t.v, t.position);
+    });
+}
+
+/// A texel the light map fills (see [`rasterize`]): where it is, and the point of its triangle
+/// it stands for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AtlasTexel {
+    /// Page.
+    pub page: u32,
+    /// Column.
+    pub x: u32,
+    /// Row.
+    pub y: u32,
+    /// The scene triangle.
+    pub triangle: u32,
+    /// Barycentric weight of the triangle's second vertex (clamped onto it for ring texels).
+    pub u: f32,
+    /// Barycentric weight of its third vertex.
+    pub v: f32,
+    /// The point, in scene coordinates.
+    pub position: DVec3,
+    /// Whether the texel's centre lies inside the chart (`false`: the ring around it).
+    pub inside: bool,
+}
+
+impl Atlas {
+    /// Every texel [`Atlas::fill`] writes, page by page, in the order it writes them.
+    pub fn texels(&self, scene: &Scene) -> Vec<AtlasTexel> {
+        let mut out = Vec::new();
+        for p in 0..self.pages {
+            let charts = scene
+                .triangles
+                .iter()
+                .zip(&self.uv)
+                .enumerate()
+                .filter(|(i, _)| self.page.get(*i).copied().unwrap_or(0) == p)
+                .map(|(i, (t, uv))| (i, *uv, t.vertices));
+            visit_filled(self.width, self.height, charts, |t| {
+                out.push(AtlasTexel { page: p, ..t });
+            });
+        }
+        out
+    }
+}
+
+/// Calls `f` once per texel [`rasterize`] fills (page 0 in the texel), inside texels first.
+fn visit_filled(
+    width: u32,
+    height: u32,
+    charts: impl Iterator<Item = (usize, [Vec2; 3], [DVec3; 3])>,
+    mut f: impl FnMut(AtlasTexel),
+) {
     let charts: Vec<(usize, [Vec2; 3], [DVec3; 3])> = charts.collect();
-    let mut covered = vec![false; texels.len()];
+    let mut covered = vec![false; width as usize * height as usize];
     let (w, h) = (width as f32, height as f32);
     for pass in 0..2 {
         for &(index, uv, p) in &charts {
@@ -478,8 +532,18 @@ pub fn rasterize(
                     // Barycentrics, clamped onto the triangle for the ring around it.
                     let u = u.clamp(0.0, 1.0);
                     let v = v.clamp(0.0, 1.0 - u);
-                    let pos = p[0] + (p[1] - p[0]) * f64::from(u) + (p[2] - p[0]) * f64::from(v);
-                    texels[i] = eval(index, u, v, pos);
+                    let position =
+                        p[0] + (p[1] - p[0]) * f64::from(u) + (p[2] - p[0]) * f64::from(v);
+                    f(AtlasTexel {
+                        page: 0,
+                        x,
+                        y,
+                        triangle: index as u32,
+                        u,
+                        v,
+                        position,
+                        inside,
+                    });
                     covered[i] = true;
                 }
             }

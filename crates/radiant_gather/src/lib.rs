@@ -1,0 +1,794 @@
+//! Radiosity by direct rendering, the lecture's "using direct rendering" (and what
+//! lightmapper.h does): a GPU hemicube gather on wgpu whose receivers are the light map's texels.
+//!
+//! Every iteration is one Jacobi sweep as the notes write it:
+//!
+//! ```text
+//! for each receiver i:  H_new[i] = D[i] + Σ_pixels ΔF · B_old(pixel)
+//! ```
+//!
+//! where `B_old = E + ρ H_old` is what the scene shows when drawn with the current light map,
+//! `ΔF` the delta form factors of the hemicube (normalised so they sum to 1, as the CPU
+//! hemicube's), and `D` the light of punctual lights (irradiance / π, with shadow rays on the
+//! CPU). The light map holds `H`, the incident radiance in emissive units, as the bake's
+//! (`radiant_radiosity::lightmap`): a surface of reflectance `ρ` shows `E + ρ H`.
+//!
+//! On the GPU (`gather.wgsl`): receivers go in batches onto one atlas of hemicube cells (3R × R
+//! pixels each: the top face and the four upper half side faces); one instanced draw per batch
+//! renders every face of every cell, each clipped to its own frustum with clip distances, with
+//! a reversed infinite depth (the near plane just above the receiver, which sits a hair above
+//! its surface, so its own surface is never seen); a back face draws black (surfaces are
+//! one-sided). A compute pass weights and sums each cell in one workgroup and writes `H` into
+//! the next light map (ping-pong, so the sweep is Jacobi) and into a buffer read back for the
+//! convergence test. The gather is a form-factor-free mode: no links, nothing stored per pair.
+//!
+//! Not drawn as the bake has them (documented limits): alpha masks (masked surfaces are
+//! opaque), textures' variation within a surface (each surface shows its mean reflectance and
+//! emission), image skies (refused), dynamic surfaces (left out, as by the bake).
+
+mod gpu;
+
+use std::time::Instant;
+
+use glam::{DVec3, Vec3};
+use radiant_radiosity::Rgb;
+use radiant_radiosity::lightmap::LightMap;
+use radiant_radiosity::metrics::SurfaceMean;
+use radiant_render::{GpuContext, RenderError};
+use radiant_scene::atlas::{Atlas, AtlasError, AtlasTexel};
+use radiant_scene::{Scene, Sky};
+use radiant_visibility::{Bvh, Visibility};
+
+/// Chart texels the automatic texel density aims at: about lightmapper.h's Cornell box map.
+pub const DEFAULT_TEXELS: f64 = 4096.0;
+
+/// The CPU methods to name when there is no GPU.
+pub const CPU_METHODS: &str = "--method jacobi, gauss-seidel, southwell or direct";
+
+/// How to gather.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GatherParams {
+    /// Hemicube resolution: the top face is `resolution²` pixels (even, 8..=1024).
+    pub resolution: u32,
+    /// Light-map texels per scene unit; `None`: about [`DEFAULT_TEXELS`] chart texels.
+    pub texel_density: Option<f64>,
+    /// Side of a light-map page (64..=8192).
+    pub page_side: u32,
+    /// Stop when the estimated remaining relative change (`Δ q / (1 − q)`, `q` the observed
+    /// contraction of `Δ`, the relative L1 change of a sweep) falls below this.
+    pub tolerance: f64,
+    /// At most this many sweeps.
+    pub max_iterations: u32,
+}
+
+impl Default for GatherParams {
+    fn default() -> Self {
+        Self {
+            resolution: 64,
+            texel_density: None,
+            page_side: 2048,
+            tolerance: 1e-3,
+            max_iterations: 500,
+        }
+    }
+}
+
+/// What can go wrong.
+#[derive(Debug, thiserror::Error)]
+pub enum GatherError {
+    /// No GPU adapter (or device).
+    #[error(
+        "--method gpu-hemicube needs a GPU adapter: {0}. Without one, use a CPU method: {CPU_METHODS}"
+    )]
+    NoAdapter(RenderError),
+    /// The adapter lacks a feature the gather needs.
+    #[error(
+        "the GPU adapter {adapter} lacks {feature}, which --method gpu-hemicube needs; use a CPU method: {CPU_METHODS}"
+    )]
+    MissingFeature {
+        /// The adapter.
+        adapter: String,
+        /// What it lacks.
+        feature: &'static str,
+    },
+    /// A parameter out of its range.
+    #[error("{field} = {value} is outside {range}")]
+    InvalidSetting {
+        /// The parameter.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+        /// What it may be.
+        range: &'static str,
+    },
+    /// Nothing in the scene emits light: there is nothing to gather.
+    #[error("nothing in the scene emits light (no emissive surface, punctual light or sky)")]
+    NoEmitters,
+    /// The scene has nothing static to bake.
+    #[error("the scene has no static triangles to bake")]
+    NoGeometry,
+    /// Something in the scene the gather does not draw.
+    #[error("--method gpu-hemicube does not handle {0} yet; use a CPU method: {CPU_METHODS}")]
+    Unsupported(&'static str),
+    /// The light-map atlas could not be made.
+    #[error(transparent)]
+    Atlas(#[from] AtlasError),
+    /// A wgpu validation or readback error.
+    #[error("GPU: {0}")]
+    Gpu(RenderError),
+    /// A sweep produced a value that is not finite.
+    #[error("sweep {iteration} produced a non-finite value at receiver {receiver}")]
+    NonFinite {
+        /// The sweep (1-based).
+        iteration: u32,
+        /// The receiver.
+        receiver: usize,
+    },
+}
+
+/// One sweep's outcome.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Step {
+    /// Sweeps so far.
+    pub iterations: u32,
+    /// Relative L1 change of `H` in this sweep.
+    pub change: f64,
+    /// Estimated remaining relative change (`change · q / (1 − q)`; `change` until `q` is known).
+    pub estimate: f64,
+    /// Whether the estimate fell below the tolerance (or the sweep limit was reached).
+    pub converged: bool,
+    /// Seconds this sweep took.
+    pub seconds: f64,
+}
+
+/// A receiver on the CPU side: which texel, which triangle.
+#[derive(Clone, Copy, Debug)]
+struct Receiver {
+    texel: AtlasTexel,
+}
+
+/// The GPU gather over one scene.
+pub struct GpuGather {
+    gpu: gpu::Gpu,
+    atlas: Atlas,
+    receivers: Vec<Receiver>,
+    h: Vec<[f32; 3]>,
+    /// Per scene triangle: reflectance and emission (of its surface), area, surface, static.
+    triangles: Vec<TriangleInfo>,
+    surfaces: Vec<(String, bool)>,
+    params: GatherParams,
+    iterations: u32,
+    last_change: Option<f64>,
+    setup_seconds: f64,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct TriangleInfo {
+    rho: Rgb,
+    emission: Rgb,
+    area: f64,
+    surface: u32,
+    baked: bool,
+}
+
+impl GpuGather {
+    /// Prepares the gather of `scene` on a headless GPU context.
+    pub fn new(scene: &Scene, params: &GatherParams) -> Result<Self, GatherError> {
+        check_params(params)?;
+        check_scene(scene)?;
+        let ctx = GpuContext::headless().map_err(GatherError::NoAdapter)?;
+        Self::with_context(ctx, scene, params)
+    }
+
+    /// Prepares the gather of `scene` on `ctx`.
+    pub fn with_context(
+        ctx: GpuContext,
+        scene: &Scene,
+        params: &GatherParams,
+    ) -> Result<Self, GatherError> {
+        let start = Instant::now();
+        check_params(params)?;
+        check_scene(scene)?;
+        if !ctx.features.contains(wgpu::Features::CLIP_DISTANCES) {
+            return Err(GatherError::MissingFeature {
+                adapter: ctx.info.name.clone(),
+                feature: "clip distances (wgpu::Features::CLIP_DISTANCES)",
+            });
+        }
+        let baked: Vec<bool> = scene
+            .triangles
+            .iter()
+            .map(|t| {
+                scene
+                    .surfaces
+                    .get(t.surface as usize)
+                    .is_some_and(|s| !s.dynamic)
+            })
+            .collect();
+        let density = match params.texel_density {
+            Some(d) => d,
+            None => {
+                let area: f64 = scene
+                    .triangles
+                    .iter()
+                    .zip(&baked)
+                    .filter(|(_, b)| **b)
+                    .map(|(t, _)| t.area())
+                    .filter(|a| a.is_finite())
+                    .sum();
+                (DEFAULT_TEXELS / area.max(f64::MIN_POSITIVE)).sqrt()
+            }
+        };
+        let atlas = Atlas::paged(scene, Some(density), params.page_side)?;
+        let frame = Frame::of(scene, &baked).ok_or(GatherError::NoGeometry)?;
+        let triangles: Vec<TriangleInfo> = scene
+            .triangles
+            .iter()
+            .zip(&baked)
+            .map(|(t, &baked)| {
+                let s = scene.surfaces.get(t.surface as usize);
+                TriangleInfo {
+                    rho: s.map_or([0.0; 3], |s| s.reflectance),
+                    emission: s.map_or([0.0; 3], |s| s.emission),
+                    area: t.area(),
+                    surface: t.surface,
+                    baked,
+                }
+            })
+            .collect();
+        let receivers = receivers(&atlas, scene, &baked);
+        if receivers.is_empty() {
+            return Err(GatherError::NoGeometry);
+        }
+        let gpu_receivers = gpu_receivers(scene, &frame, &receivers, &baked);
+        let vertices = gpu::vertices(scene, &atlas, &frame, &baked);
+        let materials: Vec<gpu::GpuMaterial> = scene
+            .surfaces
+            .iter()
+            .map(|s| gpu::GpuMaterial {
+                reflectance: [
+                    s.reflectance[0] as f32,
+                    s.reflectance[1] as f32,
+                    s.reflectance[2] as f32,
+                    0.0,
+                ],
+                emission: [
+                    s.emission[0] as f32,
+                    s.emission[1] as f32,
+                    s.emission[2] as f32,
+                    0.0,
+                ],
+            })
+            .collect();
+        let sky = match &scene.sky {
+            None => gpu::SkyUniform::None,
+            Some(Sky::Uniform { radiance }) => gpu::SkyUniform::Uniform(*radiance),
+            Some(Sky::Gradient { zenith, horizon }) => gpu::SkyUniform::Gradient(*zenith, *horizon),
+            Some(Sky::Image(_)) => return Err(GatherError::Unsupported("an image sky")),
+        };
+        let gpu = gpu::Gpu::new(
+            ctx,
+            &gpu::Setup {
+                resolution: params.resolution,
+                atlas: &atlas,
+                receivers: &gpu_receivers,
+                vertices: &vertices,
+                materials: &materials,
+                sky,
+                near: NEAR,
+            },
+        )?;
+        let n = receivers.len();
+        tracing::info!(
+            "gpu-hemicube: {n} receivers on {} page(s) of {}×{} ({:.1} texels per unit), hemicubes of {}², {} batch(es), adapter {}",
+            atlas.pages,
+            atlas.width,
+            atlas.height,
+            density,
+            params.resolution,
+            gpu.batches(),
+            gpu.adapter()
+        );
+        Ok(Self {
+            gpu,
+            atlas,
+            receivers,
+            h: vec![[0.0; 3]; n],
+            triangles,
+            surfaces: scene
+                .surfaces
+                .iter()
+                .map(|s| (s.name.clone(), s.is_emitter()))
+                .collect(),
+            params: params.clone(),
+            iterations: 0,
+            last_change: None,
+            setup_seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// One Jacobi sweep over every receiver.
+    pub fn step(&mut self) -> Result<Step, GatherError> {
+        let start = Instant::now();
+        let new = self.gpu.sweep()?;
+        self.iterations += 1;
+        let (mut diff, mut total) = (0.0f64, 0.0f64);
+        for (i, (n, o)) in new.iter().zip(&self.h).enumerate() {
+            if n.iter().any(|v| !v.is_finite()) {
+                return Err(GatherError::NonFinite {
+                    iteration: self.iterations,
+                    receiver: i,
+                });
+            }
+            for c in 0..3 {
+                diff += f64::from((n[c] - o[c]).abs());
+                total += f64::from(n[c].abs());
+            }
+        }
+        self.h = new;
+        let change = if total > 0.0 { diff / total } else { 0.0 };
+        let estimate = match self.last_change {
+            Some(prev) if prev > 0.0 && change < prev => {
+                let q = change / prev;
+                change * q / (1.0 - q)
+            }
+            _ => change,
+        };
+        self.last_change = Some(change);
+        Ok(Step {
+            iterations: self.iterations,
+            change,
+            estimate,
+            converged: estimate <= self.params.tolerance
+                || self.iterations >= self.params.max_iterations,
+            seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// Sweeps until converged; `on_step` sees each sweep.
+    pub fn solve(&mut self, mut on_step: impl FnMut(&Step)) -> Result<Step, GatherError> {
+        loop {
+            let s = self.step()?;
+            on_step(&s);
+            if s.converged {
+                return Ok(s);
+            }
+        }
+    }
+
+    /// Sweeps so far.
+    pub fn iterations(&self) -> u32 {
+        self.iterations
+    }
+
+    /// Receivers (light-map texels, the ring around each chart included).
+    pub fn receivers(&self) -> usize {
+        self.receivers.len()
+    }
+
+    /// Seconds the setup took (atlas, receivers, direct light, pipelines).
+    pub fn setup_seconds(&self) -> f64 {
+        self.setup_seconds
+    }
+
+    /// The light-map atlas the receivers sit on.
+    pub fn atlas(&self) -> &Atlas {
+        &self.atlas
+    }
+
+    /// The adapter's name and backend.
+    pub fn adapter(&self) -> String {
+        self.gpu.adapter()
+    }
+
+    /// Batches of hemicubes per sweep.
+    pub fn batches(&self) -> usize {
+        self.gpu.batches()
+    }
+
+    /// The current light map (`H`, as the bake's: texels outside charts and their ring are 0).
+    pub fn lightmap(&self) -> LightMap {
+        let page = self.atlas.width as usize * self.atlas.height as usize;
+        let mut texels = vec![[0.0f32; 3]; page * self.atlas.pages as usize];
+        for (r, h) in self.receivers.iter().zip(&self.h) {
+            let t = r.texel;
+            texels[t.page as usize * page + (t.y * self.atlas.width + t.x) as usize] = *h;
+        }
+        LightMap {
+            width: self.atlas.width,
+            height: self.atlas.height,
+            pages: self.atlas.pages,
+            texels,
+        }
+    }
+
+    /// Per-surface area-weighted mean radiosity `E + ρ H` (each triangle's `H` the mean of its
+    /// texels inside the chart, or of its ring when it has none).
+    #[expect(
+        clippy::needless_range_loop,
+        reason = "RGB channels index three arrays at once"
+    )]
+    pub fn surface_means(&self) -> Vec<SurfaceMean> {
+        let mut per_tri = vec![([0.0f64; 3], 0u32, [0.0f64; 3], 0u32); self.triangles.len()];
+        for (r, h) in self.receivers.iter().zip(&self.h) {
+            let e = &mut per_tri[r.texel.triangle as usize];
+            let (sum, count) = if r.texel.inside {
+                (&mut e.0, &mut e.1)
+            } else {
+                (&mut e.2, &mut e.3)
+            };
+            for (s, v) in sum.iter_mut().zip(h) {
+                *s += f64::from(*v);
+            }
+            *count += 1;
+        }
+        let mut acc = vec![(0.0f64, [0.0f64; 3]); self.surfaces.len()];
+        for (t, (inside, ni, ring, nr)) in self.triangles.iter().zip(&per_tri) {
+            let (sum, n) = if *ni > 0 { (inside, *ni) } else { (ring, *nr) };
+            if !t.baked || n == 0 || !(t.area > 0.0 && t.area.is_finite()) {
+                continue;
+            }
+            let a = &mut acc[t.surface as usize];
+            a.0 += t.area;
+            for c in 0..3 {
+                a.1[c] += t.area * (t.emission[c] + t.rho[c] * sum[c] / f64::from(n));
+            }
+        }
+        self.surfaces
+            .iter()
+            .zip(acc)
+            .filter(|(_, (a, _))| *a > 0.0)
+            .map(|((name, emitter), (a, m))| SurfaceMean {
+                name: name.clone(),
+                area: a,
+                mean: m.map(|v| v / a),
+                emitter: *emitter,
+            })
+            .collect()
+    }
+
+    /// Radiosity `E + ρ H` at the point `p` of the surface facing `normal` (the light map
+    /// sampled bilinearly there), or `None` when no baked triangle holds the point.
+    pub fn radiosity_at(&self, scene: &Scene, p: DVec3, normal: DVec3) -> Option<Rgb> {
+        let map = self.lightmap();
+        let diag = scene_diagonal(scene);
+        let mut best: Option<(f64, usize, f64, f64)> = None;
+        for (i, t) in scene.triangles.iter().enumerate() {
+            if !self.triangles[i].baked {
+                continue;
+            }
+            let [a, b, c] = t.vertices;
+            let n = (b - a).cross(c - a);
+            let len = n.length();
+            if len <= 0.0 || len.is_nan() || n.dot(normal) / len < 0.9 {
+                continue;
+            }
+            let dist = (p - a).dot(n / len).abs();
+            if dist > 1e-3 * diag {
+                continue;
+            }
+            let (u, v) = barycentric(a, b, c, p);
+            let slack = 1e-6;
+            if u < -slack || v < -slack || u + v > 1.0 + slack {
+                continue;
+            }
+            if best.is_none_or(|b| dist < b.0) {
+                best = Some((dist, i, u, v));
+            }
+        }
+        let (_, i, u, v) = best?;
+        let uv = self.atlas.uv[i];
+        let q = uv[0] + (uv[1] - uv[0]) * u as f32 + (uv[2] - uv[0]) * v as f32;
+        let h = bilinear(&map, self.atlas.page[i], q.x, q.y);
+        let t = &self.triangles[i];
+        Some(std::array::from_fn(|c| t.emission[c] + t.rho[c] * h[c]))
+    }
+}
+
+/// Bilinear sample of page `page` of `map` at `(u, v)` in [0, 1]² (clamped to the edge).
+fn bilinear(map: &LightMap, page: u32, u: f32, v: f32) -> Rgb {
+    let (w, h) = (map.width as f32, map.height as f32);
+    let (x, y) = (u * w - 0.5, v * h - 0.5);
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (f64::from(x - x0), f64::from(y - y0));
+    let at = |xi: f32, yi: f32| -> [f32; 3] {
+        let xi = xi.clamp(0.0, w - 1.0) as usize;
+        let yi = yi.clamp(0.0, h - 1.0) as usize;
+        let base = page as usize * map.width as usize * map.height as usize;
+        map.texels[base + yi * map.width as usize + xi]
+    };
+    let (a, b, c, d) = (
+        at(x0, y0),
+        at(x0 + 1.0, y0),
+        at(x0, y0 + 1.0),
+        at(x0 + 1.0, y0 + 1.0),
+    );
+    std::array::from_fn(|k| {
+        let top = f64::from(a[k]) * (1.0 - fx) + f64::from(b[k]) * fx;
+        let bottom = f64::from(c[k]) * (1.0 - fx) + f64::from(d[k]) * fx;
+        top * (1.0 - fy) + bottom * fy
+    })
+}
+
+/// Barycentric weights of `p` (projected) for vertices `b` and `c`.
+fn barycentric(a: DVec3, b: DVec3, c: DVec3, p: DVec3) -> (f64, f64) {
+    let (e1, e2, q) = (b - a, c - a, p - a);
+    let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let (q1, q2) = (q.dot(e1), q.dot(e2));
+    let det = d11 * d22 - d12 * d12;
+    if det.abs() < f64::MIN_POSITIVE {
+        return (-1.0, -1.0);
+    }
+    ((d22 * q1 - d12 * q2) / det, (d11 * q2 - d12 * q1) / det)
+}
+
+/// The hemicube's centre sits this far above its surface, and the near plane half as far
+/// (scene-local units: the scene fits the unit sphere).
+const LIFT: f64 = 1e-5;
+const NEAR: f32 = 5e-6;
+
+fn check_params(p: &GatherParams) -> Result<(), GatherError> {
+    if !(8..=1024).contains(&p.resolution) || !p.resolution.is_multiple_of(2) {
+        return Err(GatherError::InvalidSetting {
+            field: "hemicube resolution",
+            value: f64::from(p.resolution),
+            range: "an even number in 8..=1024",
+        });
+    }
+    if let Some(d) = p.texel_density
+        && !(d > 0.0 && d.is_finite())
+    {
+        return Err(GatherError::InvalidSetting {
+            field: "texel density",
+            value: d,
+            range: "a positive, finite number",
+        });
+    }
+    if !(64..=8192).contains(&p.page_side) {
+        return Err(GatherError::InvalidSetting {
+            field: "light-map page side",
+            value: f64::from(p.page_side),
+            range: "64..=8192",
+        });
+    }
+    if !(p.tolerance > 0.0 && p.tolerance.is_finite()) {
+        return Err(GatherError::InvalidSetting {
+            field: "tolerance",
+            value: p.tolerance,
+            range: "a positive, finite number",
+        });
+    }
+    if p.max_iterations == 0 {
+        return Err(GatherError::InvalidSetting {
+            field: "max iterations",
+            value: 0.0,
+            range: "at least 1",
+        });
+    }
+    Ok(())
+}
+
+fn check_scene(scene: &Scene) -> Result<(), GatherError> {
+    if !scene.has_emitters() {
+        return Err(GatherError::NoEmitters);
+    }
+    Ok(())
+}
+
+fn scene_diagonal(scene: &Scene) -> f64 {
+    let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+    for t in &scene.triangles {
+        for v in t.vertices {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+    }
+    (hi - lo).length()
+}
+
+/// Scene coordinates to local ones: the baked triangles' bounding box centred and scaled into
+/// the unit sphere, so a level far from the origin keeps f32 precision.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Frame {
+    centre: DVec3,
+    scale: f64,
+}
+
+impl Frame {
+    fn of(scene: &Scene, baked: &[bool]) -> Option<Frame> {
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for (t, _) in scene.triangles.iter().zip(baked).filter(|(_, b)| **b) {
+            for v in t.vertices {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+        }
+        let scale = 0.5 * (hi - lo).length();
+        (scale > 0.0 && scale.is_finite()).then(|| Frame {
+            centre: 0.5 * (lo + hi),
+            scale,
+        })
+    }
+
+    pub(crate) fn local(&self, p: DVec3) -> DVec3 {
+        (p - self.centre) / self.scale
+    }
+}
+
+/// The texels [`Atlas::fill`] writes on baked triangles, the last writer of each texel kept.
+fn receivers(atlas: &Atlas, scene: &Scene, baked: &[bool]) -> Vec<Receiver> {
+    let texels = atlas.texels(scene);
+    let page = atlas.width as usize * atlas.height as usize;
+    let mut last = vec![u32::MAX; page * atlas.pages as usize];
+    for (k, t) in texels.iter().enumerate() {
+        last[t.page as usize * page + (t.y * atlas.width + t.x) as usize] = k as u32;
+    }
+    texels
+        .iter()
+        .enumerate()
+        .filter(|(k, t)| {
+            last[t.page as usize * page + (t.y * atlas.width + t.x) as usize] == *k as u32
+                && baked.get(t.triangle as usize).copied().unwrap_or(false)
+        })
+        .map(|(_, t)| Receiver { texel: *t })
+        .collect()
+}
+
+/// An orthonormal `(t, b)` with `t × b = n` (Duff et al. 2017).
+fn basis(n: DVec3) -> (DVec3, DVec3) {
+    let sign = 1f64.copysign(n.z);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    (
+        DVec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
+        DVec3::new(b, sign + n.y * n.y * a, -n.y),
+    )
+}
+
+/// The receivers as the GPU reads them: frame, lifted centre, texel and punctual light.
+fn gpu_receivers(
+    scene: &Scene,
+    frame: &Frame,
+    receivers: &[Receiver],
+    baked: &[bool],
+) -> Vec<gpu::GpuReceiver> {
+    use rayon::prelude::*;
+    let local_tris: Vec<[Vec3; 3]> = scene
+        .triangles
+        .iter()
+        .zip(baked)
+        .filter(|(_, b)| **b)
+        .map(|(t, _)| t.vertices.map(|v| frame.local(v).as_vec3()))
+        .collect();
+    let vis = (!scene.lights.is_empty()).then(|| Bvh::new(&local_tris));
+    let lights: Vec<(DVec3, &radiant_scene::Light)> = scene
+        .lights
+        .iter()
+        .map(|l| (frame.local(l.position), l))
+        .collect();
+    receivers
+        .par_iter()
+        .with_min_len(256)
+        .map(|r| {
+            let t = &scene.triangles[r.texel.triangle as usize];
+            let [a, b, c] = t.vertices;
+            let n = (b - a).cross(c - a).normalize_or_zero();
+            let (tt, bb) = basis(n);
+            // A ring texel stands for the nearest point of its triangle, which may lie on an
+            // edge another surface meets: move it a hair inside, so its hemicube is not centred
+            // in that surface's plane (half of it would look out of the scene).
+            let position = if r.texel.inside {
+                r.texel.position
+            } else {
+                let centroid = (a + b + c) / 3.0;
+                r.texel.position + (centroid - r.texel.position) * 1e-2
+            };
+            let x = frame.local(position);
+            let origin = x + n * LIFT;
+            let mut direct = [0.0f64; 3];
+            if let Some(vis) = &vis {
+                for (local, light) in &lights {
+                    let (to_light, dist, target) = match light.kind {
+                        radiant_scene::LightKind::Directional => {
+                            let d = -light.direction;
+                            (d, 1.0, x + d * 4.0)
+                        }
+                        _ => {
+                            let d = *local - x;
+                            let len = d.length();
+                            if len <= 0.0 {
+                                continue;
+                            }
+                            (d / len, len * frame.scale, *local)
+                        }
+                    };
+                    let irr = light.irradiance(to_light, n.dot(to_light), dist);
+                    if irr <= 0.0 {
+                        continue;
+                    }
+                    let from = x + n * 1e-4;
+                    if !vis.segment_clear(from.as_vec3(), target.as_vec3()) {
+                        continue;
+                    }
+                    for (k, d) in direct.iter_mut().enumerate() {
+                        *d += irr * light.color[k] / std::f64::consts::PI;
+                    }
+                }
+            }
+            let v4 = |v: DVec3| [v.x as f32, v.y as f32, v.z as f32, 0.0];
+            gpu::GpuReceiver {
+                origin: v4(origin),
+                t: v4(tt),
+                b: v4(bb),
+                n: v4(n),
+                direct: [direct[0] as f32, direct[1] as f32, direct[2] as f32, 0.0],
+                texel: [r.texel.x, r.texel.y, r.texel.page, 0],
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_basis_is_right_handed_and_orthonormal() {
+        for n in [
+            DVec3::Z,
+            -DVec3::Z,
+            DVec3::X,
+            DVec3::new(0.3, -0.5, 0.8).normalize(),
+        ] {
+            let (t, b) = basis(n);
+            assert!((t.cross(b) - n).length() < 1e-12, "{n}");
+            assert!(t.dot(n).abs() < 1e-12 && b.dot(n).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn bad_parameters_are_typed_errors() {
+        for p in [
+            GatherParams {
+                resolution: 7,
+                ..Default::default()
+            },
+            GatherParams {
+                resolution: 2048,
+                ..Default::default()
+            },
+            GatherParams {
+                texel_density: Some(f64::NAN),
+                ..Default::default()
+            },
+            GatherParams {
+                tolerance: 0.0,
+                ..Default::default()
+            },
+            GatherParams {
+                page_side: 16,
+                ..Default::default()
+            },
+        ] {
+            assert!(matches!(
+                check_params(&p),
+                Err(GatherError::InvalidSetting { .. })
+            ));
+        }
+        assert!(check_params(&GatherParams::default()).is_ok());
+    }
+
+    #[test]
+    fn a_scene_without_emitters_is_refused_before_any_gpu_work() {
+        let mut scene = radiant_scene::builtin("cornell-box").expect("builtin");
+        for s in &mut scene.surfaces {
+            s.emission = [0.0; 3];
+        }
+        scene.sky = None;
+        scene.lights.clear();
+        assert!(matches!(
+            GpuGather::new(&scene, &GatherParams::default()),
+            Err(GatherError::NoEmitters)
+        ));
+    }
+}
