@@ -125,6 +125,14 @@ pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
 }
 
 pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
+    if args.method == "gpu-hemicube" {
+        #[cfg(feature = "render")]
+        return crate::gather_cmd::bake(args);
+        #[cfg(not(feature = "render"))]
+        anyhow::bail!(
+            "--method gpu-hemicube needs a build with the `render` feature (wgpu); use jacobi, gauss-seidel, southwell or direct"
+        );
+    }
     args.solve.init_threads()?;
     let start = Instant::now();
     let solver = parse_solver(&args.method)?;

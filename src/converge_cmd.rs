@@ -23,9 +23,16 @@ struct Row {
 pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
     args.solve.init_threads()?;
     let (scene, source) = load_scene(&args.scene)?;
+    let gpu = args.methods.iter().any(|m| m == "gpu-hemicube");
+    #[cfg(not(feature = "render"))]
+    anyhow::ensure!(
+        !gpu,
+        "gpu-hemicube needs a build with the `render` feature (wgpu)"
+    );
     let solvers = args
         .methods
         .iter()
+        .filter(|m| *m != "gpu-hemicube")
         .map(|m| parse_solver(m))
         .collect::<anyhow::Result<Vec<_>>>()?;
     let ffs = args
@@ -184,6 +191,10 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
             });
         }
     }
+    #[cfg(feature = "render")]
+    if gpu {
+        gpu_curve(args, &scene, &file_ref, time_limit, &mut csv, &mut curves)?;
+    }
     write_atomic(&args.out.join("convergence.csv"), csv.as_bytes())?;
     let png = plot_convergence(
         &curves,
@@ -195,6 +206,64 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
         "wrote {}/convergence.csv and convergence.png",
         args.out.display()
     );
+    Ok(())
+}
+
+/// The GPU hemicube gather's curve (`gpu-hemicube` in `--methods`): its error after each sweep
+/// against the per-surface reference.
+#[cfg(feature = "render")]
+fn gpu_curve(
+    args: &ConvergeArgs,
+    scene: &radiant::scene::Scene,
+    file_ref: &Option<NamedReference>,
+    time_limit: f64,
+    csv: &mut String,
+    curves: &mut Vec<Curve>,
+) -> anyhow::Result<()> {
+    let label = "gpu-hemicube / gpu";
+    let Some((_, rows)) = file_ref else {
+        println!(
+            "{label}: skipped: it needs a per-surface reference (--reference path or a CSV); the direct solve is on another mesh"
+        );
+        return Ok(());
+    };
+    let samples = match crate::gather_cmd::curve(scene, &args.solve, rows, time_limit) {
+        Ok(s) => s,
+        Err(e) => {
+            println!("{label}: skipped: {e}");
+            return Ok(());
+        }
+    };
+    for s in &samples {
+        let e = s.error.unwrap_or_default();
+        let _ = writeln!(
+            csv,
+            "gpu-hemicube,gpu-hemicube,{:.6},{},{:.6e},{:.6e},{:.6e},{:.6e}",
+            s.t_s, s.iterations, e.rel_rms, e.max_rel, s.estimate, e.mean_rel
+        );
+    }
+    if let Some(last) = samples.last() {
+        let e = last.error.unwrap_or_default();
+        let to_1pct = samples
+            .iter()
+            .find(|s| s.error.is_some_and(|e| e.mean_rel <= 0.01))
+            .map_or("never".to_string(), |s| format!("{:.3} s", s.t_s));
+        println!(
+            "{label:28} {:>8.3} s  mean {:6.3} %  max {:6.3} %  rms {:6.3} %  estimate {:.1e}  1 % at {to_1pct}",
+            last.t_s,
+            e.mean_rel * 100.0,
+            e.max_rel * 100.0,
+            e.rel_rms * 100.0,
+            last.estimate
+        );
+        curves.push(Curve {
+            label: label.to_string(),
+            points: samples
+                .iter()
+                .map(|s| (s.t_s, s.error.unwrap_or_default().mean_rel))
+                .collect(),
+        });
+    }
     Ok(())
 }
 

@@ -9,7 +9,9 @@
 //! - [`color`]: sRGB transfer functions, CIE colorimetry and tone-map operators;
 //! - [`ecs`]: scenes as `bevy_ecs` entities, the background bake and live rebake, a headless app;
 //! - [`render`] and [`post`] (feature `render`, on by default): the wgpu render graph, passes,
-//!   post-processing and offscreen capture.
+//!   post-processing and offscreen capture;
+//! - [`gather`] (feature `render`): radiosity by direct rendering, a GPU hemicube gather whose
+//!   receivers are the light map's texels (`--method gpu-hemicube`).
 //!
 //! ```
 //! use radiant::radiosity::{Bake, BakeParams};
@@ -22,6 +24,8 @@
 
 pub use radiant_color as color;
 pub use radiant_ecs as ecs;
+#[cfg(feature = "render")]
+pub use radiant_gather as gather;
 #[cfg(feature = "render")]
 pub use radiant_post as post;
 pub use radiant_radiosity as radiosity;

@@ -2,6 +2,8 @@
 
 mod bake_cmd;
 mod converge_cmd;
+#[cfg(feature = "render")]
+mod gather_cmd;
 mod output;
 mod plot;
 mod reference_cmd;
@@ -111,7 +113,9 @@ pub(crate) struct BakeArgs {
     /// Output directory.
     #[arg(long, short)]
     pub(crate) out: PathBuf,
-    /// Solver: jacobi, gauss-seidel, southwell (progressive shooting) or direct.
+    /// Solver: jacobi, gauss-seidel, southwell (progressive shooting) or direct; or
+    /// gpu-hemicube: the GPU gathers on hemicubes at every light-map texel, with no form
+    /// factors (Jacobi sweeps, --hemicube-resolution, --texel-density; needs a GPU adapter).
     #[arg(long, default_value = "gauss-seidel")]
     pub(crate) method: String,
     /// Form factors: analytic, hemicube, raycast or montecarlo.
@@ -222,7 +226,8 @@ pub(crate) struct ConvergeArgs {
     /// Output directory.
     #[arg(long, short)]
     pub(crate) out: PathBuf,
-    /// Solvers to run, comma separated.
+    /// Solvers to run, comma separated; `gpu-hemicube` adds the GPU gather's curve (against
+    /// a per-surface reference).
     #[arg(
         long,
         value_delimiter = ',',
@@ -366,7 +371,9 @@ pub(crate) fn seconds(t: f64) -> anyhow::Result<std::time::Duration> {
 /// Parses a solver name.
 pub(crate) fn parse_solver(s: &str) -> anyhow::Result<SolverKind> {
     SolverKind::parse(s).ok_or_else(|| {
-        anyhow::anyhow!("unknown method '{s}' (jacobi, gauss-seidel, southwell, direct)")
+        anyhow::anyhow!(
+            "unknown method '{s}' (jacobi, gauss-seidel, southwell, direct, gpu-hemicube)"
+        )
     })
 }
 

@@ -200,3 +200,77 @@ fn render_compares_with_the_reference_tracers_image() {
     assert!(bias.abs() < 0.08, "mean bias {bias}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn bake_with_the_gpu_hemicube_writes_a_light_map_and_its_error() {
+    let out = tmp("gpu-hemicube");
+    let stdout = run_ok(
+        &[
+            "bake",
+            "--builtin",
+            "cornell-box",
+            "--method",
+            "gpu-hemicube",
+            "--hemicube-resolution",
+            "32",
+            "--texel-density",
+            "24",
+            "--tolerance",
+            "1e-2",
+        ],
+        &out,
+    );
+    assert!(stdout.contains("gpu-hemicube on"), "{stdout}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report"))
+            .expect("json");
+    assert_eq!(report["method"], "gpu-hemicube");
+    assert_eq!(report["hemicube_resolution"], 32);
+    assert!(report["receivers"].as_u64().expect("receivers") > 500);
+    let timeline = report["timeline"].as_array().expect("timeline");
+    assert_eq!(
+        timeline.len() as u64,
+        report["iterations"].as_u64().expect("iterations")
+    );
+    // Coarse (32² hemicubes, 2 cm texels, 1 % tolerance) but well within 5 % of Mitsuba.
+    let err = report["error_vs_reference"]["mean_rel"]
+        .as_f64()
+        .expect("error");
+    assert!(err < 0.05, "{err}");
+    for f in ["surfaces.csv", "lightmap.exr", "lightmap.png"] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}
+
+#[test]
+fn the_gpu_hemicube_without_an_adapter_names_the_cpu_methods() {
+    // A backend this platform has no adapter for stands in for a machine without a GPU.
+    let missing = if cfg!(target_os = "macos") {
+        "dx12"
+    } else {
+        "metal"
+    };
+    let out = tmp("gpu-hemicube-no-adapter");
+    let st = radiant()
+        .args([
+            "bake",
+            "--builtin",
+            "cornell-box",
+            "--method",
+            "gpu-hemicube",
+            "--out",
+        ])
+        .arg(&out)
+        .env("WGPU_BACKEND", missing)
+        .output()
+        .expect("runs");
+    let stderr = String::from_utf8_lossy(&st.stderr);
+    assert!(!st.status.success());
+    assert!(
+        stderr.contains("needs a GPU adapter") && stderr.contains("--method jacobi"),
+        "{stderr}"
+    );
+    assert!(!out.join("report.json").exists());
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -1,7 +1,8 @@
-//! The GPU hemicube gather on the builtin Cornell box (or a glTF file): receivers, sweeps,
-//! time, and the error against Mitsuba per sweep.
+//! The GPU hemicube gather on the builtin Cornell box: receivers, sweeps, time, and the error
+//! against Mitsuba after each sweep (surface means), then at the 24 Mitsuba points.
 //!
-//! `cargo run --release -p radiant_gather --example gather_cornell -- [RES] [TEXELS_PER_M] [SCENE.gltf]`
+//! `cargo run --release -p radiant_gather --example gather_cornell -- [RES] [TEXELS_PER_M]`
+//! (`POINTS=1`: each point; `SURFACES=1`: each surface's mean as CSV).
 
 use std::time::Instant;
 
@@ -9,22 +10,10 @@ use radiant_gather::{GatherParams, GpuGather};
 use radiant_radiosity::metrics;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    tracing_subscriber_init();
     let args: Vec<String> = std::env::args().skip(1).collect();
     let res = args.first().map_or(Ok(64), |s| s.parse())?;
     let density = args.get(1).map(|s| s.parse::<f64>()).transpose()?;
-    let scene = match args.get(2) {
-        Some(path) => radiant_scene::load_gltf(std::path::Path::new(path))?,
-        None => radiant_scene::builtin("cornell-box")?,
-    };
-    let mut scene = scene;
-    if let Ok(keep) = std::env::var("KEEP") {
-        let keep: Vec<&str> = keep.split(',').collect();
-        let names: Vec<String> = scene.surfaces.iter().map(|s| s.name.clone()).collect();
-        scene
-            .triangles
-            .retain(|t| keep.contains(&names[t.surface as usize].as_str()));
-    }
+    let scene = radiant_scene::builtin("cornell-box")?;
     let reference = metrics::parse_reference_csv(metrics::CORNELL_BOX_REFERENCE)?;
     let start = Instant::now();
     let mut g = GpuGather::new(
@@ -45,14 +34,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     loop {
         let s = g.step()?;
         let e = metrics::compare_surfaces(&g.surface_means(), &reference)?;
-        if std::env::var_os("PROBE").is_some() {
-            let b = g.radiosity_at(
-                &scene,
-                glam::DVec3::new(0.2756, 0.0, 0.2796),
-                glam::DVec3::Y,
-            );
-            println!("floor centre B = {b:?}");
-        }
         println!(
             "sweep {:3}  {:7.3} s  change {:.2e}  estimate {:.2e}  vs Mitsuba mean {:.3} %  max {:.3} %",
             s.iterations,
@@ -66,7 +47,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             break;
         }
     }
-    if args.get(2).is_none() {
+    {
         let refs = metrics::parse_point_csv(metrics::CORNELL_POINTS_RGB, 1e-3)?;
         let c = metrics::compare_points_with(&refs, None, |r| {
             g.radiosity_at(&scene, r.position, r.normal)
@@ -90,5 +71,3 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     Ok(())
 }
-
-fn tracing_subscriber_init() {}
