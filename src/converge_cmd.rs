@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use radiant::radiosity::metrics::{self, ErrorStats};
 use radiant::radiosity::solvers::{Direct, Solver};
-use radiant::radiosity::{Bake, BakeError, FormFactorKind, Rgb, SolverKind};
+use radiant::radiosity::{Bake, FormFactorKind, Rgb, SolveError, SolverKind};
 
 use crate::bake_cmd::{NamedReference, progress_bar, reference_for};
 use crate::output::{ensure_dir, write_atomic};
@@ -101,7 +101,7 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
                 let mut d = Direct::new(params.solver_params);
                 match d.step(&bake.system, Duration::ZERO) {
                     Ok(_) => {}
-                    Err(e @ BakeError::TooLargeForDirect { .. }) => {
+                    Err(e @ SolveError::OutOfMemory { .. }) => {
                         pb.finish_and_clear();
                         println!("{label}: skipped: the direct reference needs it: {e}");
                         continue;

@@ -21,7 +21,6 @@ use std::time::{Duration, Instant};
 
 use bevy_ecs::prelude::*;
 use bevy_tasks::{AsyncComputeTaskPool, Task, TaskPoolBuilder, futures::check_ready};
-use radiant_radiosity::bake::STALL_STEPS;
 use radiant_radiosity::metrics::{SurfaceMean, surface_means};
 use radiant_radiosity::smooth::{SmoothField, element_emission};
 use radiant_radiosity::{Bake, BakeParams, Mesh, Rgb};
@@ -257,20 +256,18 @@ enum Report {
     Built {
         mesh: Arc<Mesh>,
         links: usize,
-        contraction: f64,
         resumed: bool,
     },
     Edited,
     Remeshed {
         mesh: Arc<Mesh>,
         links: usize,
-        contraction: f64,
         recomputed: usize,
     },
+    /// A solver step: its iterations, estimated error and progress, at `t` seconds.
     Step {
         t: f64,
-        iterations: u64,
-        residual: f64,
+        info: radiant_radiosity::Info,
     },
     Publish {
         radiosity: Vec<Rgb>,
@@ -321,7 +318,6 @@ fn apply(
         let _ = tx.send(Report::Remeshed {
             mesh: Arc::new(bake.mesh.clone()),
             links: bake.system.links.len(),
-            contraction: bake.system.contraction(),
             recomputed: stats.recomputed,
         });
     } else {
@@ -347,7 +343,6 @@ pub struct BakeWorker {
     edit: Option<Edit>,
     /// Increments on every scene change; publications carry the epoch they match.
     epoch: u64,
-    contraction: f64,
     tolerance: f64,
     started: Option<Instant>,
     iterations_at_edit: u64,
@@ -424,7 +419,6 @@ fn work(
                 send(Report::Built {
                     mesh: Arc::new(b.mesh.clone()),
                     links: b.system.links.len(),
-                    contraction: b.system.contraction(),
                     resumed: b.is_resumed(),
                 });
                 Box::new(b)
@@ -446,7 +440,6 @@ fn work(
     };
     let t0 = Instant::now();
     let mut last_publish: Option<Instant> = None;
-    let (mut best, mut since_best) = (f64::INFINITY, 0u32);
     loop {
         while let Ok(c) = rx.try_recv() {
             match c {
@@ -475,7 +468,6 @@ fn work(
                 Control::Edit(edit, e) => match apply(&mut bake, &edit, &tx) {
                     Ok(()) => {
                         epoch = e;
-                        (best, since_best) = (f64::INFINITY, 0);
                         send(Report::Edited);
                     }
                     Err(radiant_radiosity::BakeError::NeedsRebuild) => {
@@ -485,29 +477,22 @@ fn work(
                 },
             }
         }
-        // One sweep (or one shot) per step: the same sequence whatever the timing.
-        let p = match bake.step(Duration::ZERO) {
-            Ok(p) => p,
+        // One sweep (or one shot) per step: the same sequence whatever the timing. The stall
+        // rule is the bake's own (an edit's warm start resets it).
+        let done = match bake.step(Duration::ZERO) {
+            Ok(info) => {
+                send(Report::Step {
+                    t: t0.elapsed().as_secs_f64(),
+                    info,
+                });
+                info.converged
+            }
+            Err(e @ radiant_radiosity::SolveError::Stalled { .. }) => {
+                send(Report::Warning(e.to_string()));
+                true
+            }
             Err(e) => return Outcome::Failed(e.to_string()),
         };
-        send(Report::Step {
-            t: t0.elapsed().as_secs_f64(),
-            iterations: p.iterations,
-            residual: p.residual,
-        });
-        if p.residual < 0.99 * best {
-            (best, since_best) = (p.residual, 0);
-        } else {
-            since_best += 1;
-        }
-        let stalled = since_best >= STALL_STEPS || !p.residual.is_finite();
-        if stalled {
-            send(Report::Warning(format!(
-                "the solver stopped converging (residual {:.2e}); reflectance 1 in a closed scene?",
-                p.residual
-            )));
-        }
-        let done = p.converged || stalled;
         if done {
             // Before the final publication, so whoever sees "converged" finds the checkpoint.
             save(&bake, &setup, &tx);
@@ -584,7 +569,6 @@ fn work_clustered(
     let built = |mesh: &Mesh, links: usize| Report::Built {
         mesh: Arc::new(mesh.clone()),
         links,
-        contraction: 0.0,
         resumed: false,
     };
     let t0 = Instant::now();
@@ -596,11 +580,9 @@ fn work_clustered(
             let _ = tx.send(built(s.mesh, s.links));
             sent_built = true;
         }
-        // The residual is already an error estimate: contraction 0 above keeps it as is.
         let _ = tx.send(Report::Step {
             t: t0.elapsed().as_secs_f64(),
-            iterations: s.iterations,
-            residual: s.residual,
+            info: s.info,
         });
         if last_publish.is_none_or(|t| t.elapsed() >= setup.publish_interval) {
             let emission =
@@ -743,12 +725,10 @@ fn drain(world: &mut World) {
             Report::Built {
                 mesh,
                 links,
-                contraction,
                 resumed,
             } => {
                 let elements = mesh.element_count();
                 let mut w = world.resource_mut::<BakeWorker>();
-                w.contraction = contraction;
                 w.mesh = Some(mesh);
                 w.started = Some(Instant::now());
                 w.iterations_at_edit = 0;
@@ -765,12 +745,10 @@ fn drain(world: &mut World) {
             Report::Remeshed {
                 mesh,
                 links,
-                contraction,
                 recomputed,
             } => {
                 let mut w = world.resource_mut::<BakeWorker>();
                 w.mesh = Some(mesh);
-                w.contraction = contraction;
                 let mut s = world.resource_mut::<BakeStatus>();
                 s.links = links;
                 s.geometry_edits += 1;
@@ -784,26 +762,18 @@ fn drain(world: &mut World) {
                 s.iterations_since_edit = 0;
                 s.warning = None;
             }
-            Report::Step {
-                t,
-                iterations,
-                residual,
-            } => {
-                let (rho, tol, at_edit) = {
+            Report::Step { t, info } => {
+                let (tol, at_edit) = {
                     let w = world.resource::<BakeWorker>();
-                    (w.contraction, w.tolerance, w.iterations_at_edit)
+                    (w.tolerance, w.iterations_at_edit)
                 };
-                let err = residual / (1.0 - rho).clamp(1e-9, 1.0);
+                let err = info.estimated_error;
                 let mut s = world.resource_mut::<BakeStatus>();
                 s.phase = BakePhase::Solving;
-                s.iterations = iterations;
-                s.iterations_since_edit = iterations.saturating_sub(at_edit);
+                s.iterations = info.iterations;
+                s.iterations_since_edit = info.iterations.saturating_sub(at_edit);
                 s.estimated_error = err;
-                s.progress = if err > 0.0 && err.is_finite() {
-                    (err.ln() / tol.ln()).clamp(0.0, 1.0)
-                } else {
-                    1.0
-                };
+                s.progress = info.progress;
                 s.history.push((t, err));
                 s.eta_s = eta(&s.history, tol);
             }

@@ -14,11 +14,11 @@
 use std::io::Write;
 use std::path::Path;
 
-use radiant_scene::Scene;
-
 use crate::BakeError;
-use crate::bake::BakeParams;
+use crate::hierarchy::{Estimates, Hierarchy};
 use crate::links::Links;
+use crate::mesh::Mesh;
+use crate::rng::Fnv;
 use crate::system::Rgb;
 
 /// The magic, without its last byte: the version.
@@ -27,77 +27,51 @@ const VERSION: u8 = 2;
 
 /// What a checkpoint restores.
 pub struct Saved {
-    /// The fingerprint it was written for.
-    pub fingerprint: u64,
+    /// The hierarchy's bookkeeping (its fingerprint, enclosed elements and oracle).
+    pub hierarchy: Hierarchy,
     /// Node count of the mesh it was written for.
     pub nodes: usize,
     /// The links.
     pub links: Links,
-    /// Enclosed elements.
-    pub dead: Vec<bool>,
     /// Radiosity per element.
     pub radiosity: Vec<Rgb>,
-    /// The refinement oracle the links were built with, when stored: per-node estimates and the
-    /// threshold.
-    pub oracle: Option<(Vec<f64>, f64)>,
 }
 
-/// FNV-1a, 64 bit.
-#[derive(Clone, Copy)]
-struct Fnv(u64);
-
-impl Fnv {
-    fn new() -> Self {
-        Fnv(0xcbf2_9ce4_8422_2325)
-    }
-    fn bytes(&mut self, b: &[u8]) {
-        for &x in b {
-            self.0 ^= u64::from(x);
-            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+impl Saved {
+    /// Refuses a checkpoint written for other geometry or link parameters.
+    pub fn fits_scene(&self, fingerprint: u64) -> Result<(), BakeError> {
+        if self.hierarchy.fingerprint != fingerprint {
+            return Err(BakeError::Checkpoint(
+                "it was written for other geometry or bake parameters".into(),
+            ));
         }
+        Ok(())
     }
-    fn f64(&mut self, x: f64) {
-        self.bytes(&x.to_bits().to_le_bytes());
-    }
-}
 
-/// The fingerprint of what links depend on: geometry and the mesh, link and form-factor
-/// parameters. Lights and materials are not in it: resuming computes direct light again and
-/// takes the scene's materials, as edits do.
-pub fn fingerprint(scene: &Scene, params: &BakeParams) -> u64 {
-    let mut h = Fnv::new();
-    h.bytes(
-        format!(
-            "{:?}|{:?}|{:?}|{:?}",
-            params.mesh, params.links, params.form_factors, params.ff
-        )
-        .as_bytes(),
-    );
-    for t in &scene.triangles {
-        for v in t.vertices {
-            h.f64(v.x);
-            h.f64(v.y);
-            h.f64(v.z);
+    /// Refuses a checkpoint whose element hierarchy is not `mesh`'s.
+    pub fn fits_mesh(&self, mesh: &Mesh) -> Result<(), BakeError> {
+        if self.hierarchy.dead.len() != mesh.element_count() || self.nodes != mesh.nodes.len() {
+            return Err(BakeError::Checkpoint(
+                "its element hierarchy differs from this scene's".into(),
+            ));
         }
-        h.bytes(&t.surface.to_le_bytes());
+        Ok(())
     }
-    h.0
 }
 
 /// Writes a checkpoint atomically (temporary file, fsync, rename).
 pub fn write(
     path: &Path,
-    fingerprint: u64,
+    hierarchy: &Hierarchy,
     nodes: usize,
     links: &Links,
-    dead: &[bool],
     radiosity: &[Rgb],
-    oracle: Option<(&[f64], f64)>,
 ) -> Result<(), BakeError> {
+    let (fingerprint, dead) = (hierarchy.fingerprint, &hierarchy.dead);
     let io = |e: std::io::Error| BakeError::Checkpoint(format!("{}: {e}", path.display()));
     let n = radiosity.len();
     let hidden = links.hidden_known();
-    let oracle = oracle.filter(|(b, _)| b.len() == nodes);
+    let oracle = hierarchy.oracle.as_ref().filter(|o| o.bhat.len() == nodes);
     let flags = u64::from(hidden) | (u64::from(oracle.is_some()) << 1);
     let mut buf: Vec<u8> = Vec::with_capacity(80 + links.bytes() + n * 25 + nodes * 8);
     buf.extend_from_slice(MAGIC);
@@ -136,9 +110,9 @@ pub fn write(
             buf.extend_from_slice(&s.to_le_bytes());
         }
     }
-    if let Some((bhat, eps)) = oracle {
-        buf.extend_from_slice(&eps.to_le_bytes());
-        for b in bhat {
+    if let Some(o) = oracle {
+        buf.extend_from_slice(&o.eps.to_le_bytes());
+        for b in &o.bhat {
             buf.extend_from_slice(&b.to_le_bytes());
         }
     }
@@ -251,7 +225,8 @@ pub fn read(path: &Path) -> Result<Saved, BakeError> {
     };
     let oracle = has_oracle.then(|| {
         let eps = c.f64();
-        ((0..nodes).map(|_| c.f64()).collect::<Vec<_>>(), eps)
+        let bhat = (0..nodes).map(|_| c.f64()).collect();
+        Estimates { bhat, eps }
     });
     // Structure: monotone rows ending at the link counts, sources inside the mesh, finite values.
     let rows_ok = |row: &[usize], count: usize| {
@@ -264,14 +239,18 @@ pub fn read(path: &Path) -> Result<Saved, BakeError> {
         || src.iter().chain(&hidden_src).any(|&s| s as u64 >= nodes)
         || ff.iter().any(|f| !f.is_finite() || *f < 0.0)
         || radiosity.iter().flatten().any(|b| !b.is_finite())
-        || oracle.as_ref().is_some_and(|(b, e)| {
-            !(e.is_finite() && *e > 0.0) || b.iter().any(|x| !x.is_finite() || *x < 0.0)
+        || oracle.as_ref().is_some_and(|o| {
+            !(o.eps.is_finite() && o.eps > 0.0) || o.bhat.iter().any(|x| !x.is_finite() || *x < 0.0)
         })
     {
         return Err(bad("inconsistent contents"));
     }
     Ok(Saved {
-        fingerprint,
+        hierarchy: Hierarchy {
+            fingerprint,
+            dead,
+            oracle,
+        },
         nodes: nodes as usize,
         links: Links {
             row,
@@ -280,9 +259,7 @@ pub fn read(path: &Path) -> Result<Saved, BakeError> {
             hidden_row,
             hidden_src,
         },
-        dead,
         radiosity,
-        oracle,
     })
 }
 
@@ -316,11 +293,11 @@ mod tests {
         std::fs::write(&path, &buf).expect("write");
         let saved = read(&path).expect("a version-1 checkpoint");
         let _ = std::fs::remove_file(&path);
-        assert_eq!(saved.fingerprint, 42);
+        assert_eq!(saved.hierarchy.fingerprint, 42);
         assert_eq!(saved.links.src, [0]);
         assert_eq!(saved.links.ff, [0.5]);
         assert!(!saved.links.hidden_known());
-        assert!(saved.oracle.is_none());
+        assert!(saved.hierarchy.oracle.is_none());
         assert_eq!(saved.radiosity, [[1.0, 2.0, 3.0]]);
     }
 
@@ -336,21 +313,19 @@ mod tests {
         };
         let path = std::env::temp_dir().join(format!("radiant-v2-{}.ckpt", std::process::id()));
         let bhat = [0.5, 0.7, 0.9];
-        write(
-            &path,
-            7,
-            3,
-            &links,
-            &[false, true],
-            &[[0.1; 3], [0.2; 3]],
-            Some((&bhat, 0.02)),
-        )
-        .expect("write");
+        let hierarchy = Hierarchy {
+            fingerprint: 7,
+            dead: vec![false, true],
+            oracle: Some(Estimates {
+                bhat: bhat.to_vec(),
+                eps: 0.02,
+            }),
+        };
+        write(&path, &hierarchy, 3, &links, &[[0.1; 3], [0.2; 3]]).expect("write");
         let saved = read(&path).expect("read");
         let _ = std::fs::remove_file(&path);
         assert_eq!(saved.links.hidden_row, links.hidden_row);
         assert_eq!(saved.links.hidden_src, links.hidden_src);
-        assert_eq!(saved.oracle, Some((bhat.to_vec(), 0.02)));
-        assert_eq!(saved.dead, [false, true]);
+        assert_eq!(saved.hierarchy, hierarchy);
     }
 }

@@ -9,7 +9,10 @@
 //! - [`materials`]: per-element reflectance and emission;
 //! - [`direct_irradiance`]: light that arrives without a bounce from the punctual lights
 //!   ([`crate::lights`]) and the sky ([`sky_irradiance`]), shadowed;
-//! - [`sources`]: `S = E + ρ · E_direct / π`.
+//! - [`sources`]: `S = E + ρ · E_direct / π`;
+//! - [`Lighting`]: all of that kept for one mesh, so edits of materials or lights recompute
+//!   only what they change;
+//! - [`static_scene`] and [`validate`]: what takes part in a bake, and refusing what cannot.
 
 use std::sync::Arc;
 
@@ -19,8 +22,140 @@ use radiant_scene::{AlphaMasks, Light, Scene, Sky, Surface, TextureRef};
 use radiant_visibility::{Bvh, Visibility};
 use rayon::prelude::*;
 
-use crate::Rgb;
 use crate::mesh::Mesh;
+use crate::{BakeError, FormFactorParams, Rgb};
+
+/// The part of the scene a bake lights: dynamic surfaces take no part.
+pub fn static_scene(scene: &Scene) -> std::borrow::Cow<'_, Scene> {
+    if scene.surfaces.iter().any(|s| s.dynamic) {
+        std::borrow::Cow::Owned(scene.static_part())
+    } else {
+        std::borrow::Cow::Borrowed(scene)
+    }
+}
+
+/// Refuses materials out of range (reflectance outside [0, 1], negative or non-finite
+/// emission) and triangles that name no surface.
+pub fn validate(scene: &Scene) -> Result<(), BakeError> {
+    validate_surfaces(&scene.surfaces)?;
+    if scene
+        .triangles
+        .iter()
+        .any(|t| t.surface as usize >= scene.surfaces.len())
+    {
+        return Err(BakeError::InvalidScene(
+            "a triangle names a surface that does not exist".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// Refuses materials out of range, naming the surface.
+pub fn validate_surfaces(surfaces: &[Surface]) -> Result<(), BakeError> {
+    for s in surfaces {
+        let bad = |what: String| BakeError::InvalidMaterial {
+            surface: s.name.clone(),
+            what,
+        };
+        if s.reflectance
+            .iter()
+            .any(|r| !r.is_finite() || !(0.0..=1.0).contains(r))
+        {
+            return Err(bad(format!(
+                "reflectance {:?} is outside [0, 1]",
+                s.reflectance
+            )));
+        }
+        if s.emission.iter().any(|e| !e.is_finite() || *e < 0.0) {
+            return Err(bad(format!(
+                "emission {:?} is negative or not finite",
+                s.emission
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Refuses lights with non-finite or negative values, naming the light.
+pub fn validate_lights(lights: &[Light]) -> Result<(), BakeError> {
+    for l in lights {
+        let finite = l.position.is_finite()
+            && l.direction.is_finite()
+            && l.intensity.is_finite()
+            && l.color.iter().all(|c| c.is_finite());
+        if !finite || l.intensity < 0.0 || l.color.iter().any(|&c| c < 0.0) {
+            return Err(BakeError::InvalidParameter(format!(
+                "light '{}' has a non-finite or negative value",
+                l.name
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// What lights one mesh's elements besides their own emission: the punctual lights and the
+/// sky with their shadowed direct irradiance, the alpha masks their shadow rays pass, and the
+/// textures' footprints.
+#[derive(Clone, Debug)]
+pub struct Lighting {
+    /// The punctual lights.
+    pub lights: Vec<Light>,
+    /// The sky.
+    pub sky: Option<Sky>,
+    /// The alpha masks.
+    pub masks: Option<Arc<AlphaMasks>>,
+    /// Per element: the textures' footprints.
+    pub textures: Option<ElementTextures>,
+    /// Per element: irradiance from the lights and the sky ([`direct_irradiance`]).
+    pub direct: Option<Vec<Rgb>>,
+}
+
+impl Lighting {
+    /// The scene's lighting of `mesh`, whose ray tracer `bvh` was built with `masks`.
+    pub fn new(
+        scene: &Scene,
+        mesh: &Mesh,
+        bvh: &Bvh,
+        masks: Option<Arc<AlphaMasks>>,
+        params: &FormFactorParams,
+    ) -> Lighting {
+        Lighting {
+            lights: scene.lights.clone(),
+            sky: scene.sky.clone(),
+            masks,
+            textures: element_textures(scene, mesh),
+            direct: direct_irradiance(&scene.lights, scene.sky.as_ref(), mesh, bvh, params),
+        }
+    }
+
+    /// Per element: reflectance and the source term `S` of `surfaces` under this lighting.
+    pub fn terms(&self, surfaces: &[Surface], mesh: &Mesh) -> (Vec<Rgb>, Vec<Rgb>) {
+        let (rho, emission) = materials(surfaces, mesh, self.textures.as_ref());
+        let source = sources(&rho, &emission, self.direct.as_deref());
+        (rho, source)
+    }
+
+    /// The same textures under other lights and sky: their direct light is traced again.
+    pub fn relit(
+        &self,
+        lights: &[Light],
+        sky: Option<&Sky>,
+        mesh: &Mesh,
+        params: &FormFactorParams,
+    ) -> Lighting {
+        let direct = (!lights.is_empty() || sky.is_some()).then(|| {
+            let bvh = visibility(mesh, self.masks.as_ref());
+            direct_irradiance(lights, sky, mesh, &bvh, params)
+        });
+        Lighting {
+            lights: lights.to_vec(),
+            sky: sky.cloned(),
+            masks: self.masks.clone(),
+            textures: self.textures.clone(),
+            direct: direct.flatten(),
+        }
+    }
+}
 
 /// The alpha masks of the scene's triangles, `None` when nothing is masked.
 pub fn masks(scene: &Scene) -> Option<Arc<AlphaMasks>> {
@@ -169,7 +304,7 @@ pub fn direct_irradiance(
     sky: Option<&Sky>,
     mesh: &Mesh,
     vis: &dyn Visibility,
-    params: &crate::FormFactorParams,
+    params: &FormFactorParams,
 ) -> Option<Vec<Rgb>> {
     let sky = sky.filter(|s| !s.is_dark());
     if lights.is_empty() && sky.is_none() {

@@ -25,24 +25,31 @@ pub mod bake;
 pub mod checkpoint;
 pub mod cluster;
 pub mod form_factors;
+pub mod hierarchy;
 pub mod input;
 pub mod lightmap;
 pub mod lights;
 pub mod links;
 pub mod mesh;
 pub mod metrics;
+pub mod params;
+pub mod report;
 pub mod rng;
 pub mod scenes;
 pub mod smooth;
+pub mod solve;
 pub mod solvers;
 pub mod spectral;
 pub mod system;
 
-pub use bake::{Bake, BakeEvent, BakeParams, BakeReport, BakeResult, PhaseTimes, TimelinePoint};
+pub use bake::{Bake, BakeEvent};
 pub use form_factors::{FormFactorKind, FormFactorParams};
 pub use links::LinkParams;
 pub use mesh::{Mesh, MeshParams};
-pub use solvers::{Progress, Solver, SolverKind, SolverParams};
+pub use params::BakeParams;
+pub use report::{BakeReport, BakeResult, PhaseTimes, TimelinePoint};
+pub use solve::{Info, Solve, SolveError, Stall};
+pub use solvers::{Solver, SolverKind, SolverParams};
 pub use system::{Rgb, System};
 
 /// Errors from baking. Each says what to change.
@@ -80,9 +87,10 @@ pub enum BakeError {
         /// The limit.
         limit: usize,
     },
-    /// The system has no unique solution (reflectance 1 in a closed scene).
-    #[error("the radiosity system is singular (reflectance 1 in a closed scene?)")]
-    Singular,
+    /// The solve could not go on: singular, diverged, stalled, or out of memory
+    /// ([`SolveError`]).
+    #[error(transparent)]
+    Solve(#[from] SolveError),
     /// An edit needs links the bake does not have (it had no emitters): bake again.
     #[error("the edit adds emitters to a bake that had none: bake again")]
     NeedsRebuild,

@@ -1,5 +1,6 @@
-//! A small seeded generator. Every random choice in a bake is derived from the user's seed and
-//! the indices of what is being sampled, so results do not depend on thread count or order.
+//! A small seeded generator and hashes. Every random choice in a bake is derived from the
+//! user's seed and the indices of what is being sampled, so results do not depend on thread
+//! count or order.
 
 /// SplitMix64 finaliser over three words.
 #[inline]
@@ -36,5 +37,33 @@ impl Rng {
     #[inline]
     pub fn f64(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+    }
+}
+
+/// FNV-1a, 64 bit: checkpoint checksums and fingerprints.
+#[derive(Clone, Copy, Debug)]
+pub struct Fnv(pub u64);
+
+impl Default for Fnv {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Fnv {
+    /// The offset basis.
+    pub fn new() -> Self {
+        Fnv(0xcbf2_9ce4_8422_2325)
+    }
+    /// Hashes bytes in.
+    pub fn bytes(&mut self, b: &[u8]) {
+        for &x in b {
+            self.0 ^= u64::from(x);
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+    /// Hashes a number's bits in.
+    pub fn f64(&mut self, x: f64) {
+        self.bytes(&x.to_bits().to_le_bytes());
     }
 }

@@ -1,5 +1,6 @@
 //! Solvers for the radiosity system, each steppable within a time budget so a caller (the CLI's
-//! progress bar, an ECS system) can run it in slices: `step(budget) -> Progress`.
+//! progress bar, an ECS system) can run it in slices: `step(budget) -> Info` (see
+//! [`crate::solve`], which adds the stopping rule).
 //!
 //! - [`Jacobi`]: the lecture's iterative loop, `B ← S + ρ K B`, parallel over elements.
 //! - [`GaussSeidel`]: the same sweep using each new value at once.
@@ -19,7 +20,7 @@ use std::time::{Duration, Instant};
 
 use rayon::prelude::*;
 
-use crate::BakeError;
+use crate::solve::{Info, SolveError};
 use crate::system::{Rgb, System};
 
 /// The solvers.
@@ -90,25 +91,12 @@ impl Default for SolverParams {
     }
 }
 
-/// Where a solver stands after a step.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Progress {
-    /// Sweeps (Jacobi, Gauss–Seidel), shots (Southwell) or 1 (direct).
-    pub iterations: u64,
-    /// Relative residual (see the module docs).
-    pub residual: f64,
-    /// Unshot energy fraction.
-    pub unshot_fraction: f64,
-    /// Whether the tolerance is met.
-    pub converged: bool,
-}
-
 /// A radiosity solver.
 pub trait Solver: Send + Sync {
     /// Which solver.
     fn kind(&self) -> SolverKind;
     /// Works for about `budget` (at least one unit of work), then reports.
-    fn step(&mut self, sys: &System, budget: Duration) -> Result<Progress, BakeError>;
+    fn step(&mut self, sys: &System, budget: Duration) -> Result<Info, SolveError>;
     /// The current estimate per element, as it should be displayed.
     fn radiosity(&self, sys: &System) -> Vec<Rgb>;
     /// Continues from `b` on a changed system (same links, other materials): iterative
@@ -144,9 +132,9 @@ fn progress_from_residual(
     b: &[Rgb],
     r: &[Rgb],
     iterations: u64,
-    tol: f64,
-) -> Progress {
-    let tol = residual_target(sys, tol);
+    tolerance: f64,
+) -> Info {
+    let tol = residual_target(sys, tolerance);
     let (rn, bn) = (sys.norm(r), sys.norm(b));
     let residual = if bn > 0.0 {
         rn / bn
@@ -157,12 +145,14 @@ fn progress_from_residual(
     };
     let sp = sys.source_power();
     let unshot_fraction = if sp > 0.0 { l1(sys, r) / sp } else { 0.0 };
-    Progress {
+    Info::from_residual(
         iterations,
         residual,
         unshot_fraction,
-        converged: residual <= tol,
-    }
+        sys.contraction(),
+        tolerance,
+        residual <= tol,
+    )
 }
 
 /// Jacobi iteration.
@@ -189,7 +179,7 @@ impl Solver for Jacobi {
     fn kind(&self) -> SolverKind {
         SolverKind::Jacobi
     }
-    fn step(&mut self, sys: &System, budget: Duration) -> Result<Progress, BakeError> {
+    fn step(&mut self, sys: &System, budget: Duration) -> Result<Info, SolveError> {
         let start = Instant::now();
         loop {
             sys.pull(&self.b, &mut self.nodes);
@@ -253,7 +243,7 @@ impl Solver for GaussSeidel {
     fn kind(&self) -> SolverKind {
         SolverKind::GaussSeidel
     }
-    fn step(&mut self, sys: &System, budget: Duration) -> Result<Progress, BakeError> {
+    fn step(&mut self, sys: &System, budget: Duration) -> Result<Info, SolveError> {
         let start = Instant::now();
         loop {
             // Fresh means each sweep, so rounding in the incremental updates cannot drift.
@@ -488,7 +478,7 @@ impl Solver for Southwell {
     fn kind(&self) -> SolverKind {
         SolverKind::Southwell
     }
-    fn step(&mut self, sys: &System, budget: Duration) -> Result<Progress, BakeError> {
+    fn step(&mut self, sys: &System, budget: Duration) -> Result<Info, SolveError> {
         let start = Instant::now();
         let sp = sys.source_power();
         let tol = residual_target(sys, self.params.tolerance);
@@ -509,12 +499,14 @@ impl Solver for Southwell {
                 let rn = sys.norm(&self.unshot);
                 let bn = sys.norm(&self.b);
                 let residual = if bn > 0.0 { rn / bn } else { 0.0 };
-                return Ok(Progress {
-                    iterations: self.shots,
+                return Ok(Info::from_residual(
+                    self.shots,
                     residual,
                     unshot_fraction,
-                    converged: done,
-                });
+                    sys.contraction(),
+                    self.params.tolerance,
+                    done,
+                ));
             }
             let mut best = 0;
             for (k, &p) in self.power.iter().enumerate() {
@@ -598,13 +590,15 @@ impl Direct {
         k
     }
 
-    fn solve(&self, sys: &System) -> Result<Vec<Rgb>, BakeError> {
+    fn solve(&self, sys: &System) -> Result<Vec<Rgb>, SolveError> {
         use faer::prelude::*;
         let n = sys.len();
         if n > self.params.max_direct {
-            return Err(BakeError::TooLargeForDirect {
-                elements: n,
-                limit: self.params.max_direct,
+            let bytes = |n: usize| (n as u64).pow(2) * 8;
+            return Err(SolveError::OutOfMemory {
+                what: "the direct solver's dense matrix",
+                needed: bytes(n),
+                limit: bytes(self.params.max_direct),
             });
         }
         let k = Self::dense_k(sys);
@@ -630,7 +624,7 @@ impl Direct {
                 for i in 0..n {
                     let v = x[(i, j)];
                     if !v.is_finite() {
-                        return Err(BakeError::Singular);
+                        return Err(SolveError::Singular);
                     }
                     out[i][d] = v;
                 }
@@ -639,11 +633,11 @@ impl Direct {
         }
         let peak = out.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
         if out.iter().flatten().any(|&v| v < -1e-9 * peak) {
-            return Err(BakeError::Singular);
+            return Err(SolveError::Singular);
         }
         let residual = sys.relative_residual(&out);
         if residual.is_nan() || residual > 1e-6 {
-            return Err(BakeError::Singular);
+            return Err(SolveError::Singular);
         }
         Ok(out)
     }
@@ -653,16 +647,19 @@ impl Solver for Direct {
     fn kind(&self) -> SolverKind {
         SolverKind::Direct
     }
-    fn step(&mut self, sys: &System, _budget: Duration) -> Result<Progress, BakeError> {
+    fn step(&mut self, sys: &System, _budget: Duration) -> Result<Info, SolveError> {
         if self.b.is_none() {
             self.b = Some(self.solve(sys)?);
         }
         let b = self.b.as_deref().unwrap_or_default();
         let r = sys.residual(b);
-        let mut p = progress_from_residual(sys, b, &r, 1, self.params.tolerance);
+        let p = progress_from_residual(sys, b, &r, 1, self.params.tolerance);
         // A direct solve is done whatever its rounding; the residual says how well.
-        p.converged = p.residual.is_finite();
-        Ok(p)
+        Ok(Info {
+            converged: p.residual.is_finite(),
+            progress: 1.0,
+            ..p
+        })
     }
     fn warm_start(&mut self, _sys: &System, _b: &[Rgb]) {
         self.b = None;

@@ -18,7 +18,8 @@ use radiant_scene::Surface;
 use crate::BakeError;
 use crate::mesh::Mesh;
 use crate::metrics::{SurfaceMean, surface_means};
-use crate::solvers::{GaussSeidel, Solver, SolverParams};
+use crate::solve::{Solve, SolveError};
+use crate::solvers::{SolverKind, SolverParams};
 use crate::system::{Rgb, System};
 
 /// Spectral data of one material.
@@ -150,25 +151,20 @@ pub fn solve_spectral(
             .map(|&s| std::array::from_fn(|k| per_surface[s].1[pick(k)]))
             .collect();
         let sys = system.with_materials(rho, source);
-        let mut gs = GaussSeidel::new(&sys, params);
-        // The same stopping rule as a bake: converged, or no progress for STALL_STEPS steps.
-        let (mut best, mut since_best) = (f64::INFINITY, 0u32);
+        // The stopping rule of a bake: converged, or stalled.
+        let mut solve = Solve::new(SolverKind::GaussSeidel, &sys, params);
         loop {
-            let p = gs.step(&sys, Duration::from_millis(25))?;
-            if p.converged {
-                break;
-            }
-            if p.residual < 0.99 * best {
-                (best, since_best) = (p.residual, 0);
-            } else {
-                since_best += 1;
-            }
-            if since_best >= crate::bake::STALL_STEPS || !p.residual.is_finite() {
-                converged = false;
-                break;
+            match solve.step(&sys, Duration::from_millis(25)) {
+                Ok(info) if info.converged => break,
+                Ok(_) => {}
+                Err(SolveError::Stalled { .. }) => {
+                    converged = false;
+                    break;
+                }
+                Err(e) => return Err(e.into()),
             }
         }
-        let b = gs.radiosity(&sys);
+        let b = solve.radiosity(&sys);
         for (k, band) in (first..(first + 3).min(bands)).enumerate() {
             for i in 0..n {
                 for c in 0..3 {

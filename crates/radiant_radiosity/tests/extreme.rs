@@ -5,7 +5,9 @@ mod common;
 
 use glam::DVec3;
 use radiant_radiosity::scenes::{add_surface, box_triangles, quad};
-use radiant_radiosity::{Bake, BakeError, BakeParams, FormFactorKind, SolverKind, SolverParams};
+use radiant_radiosity::{
+    Bake, BakeError, BakeParams, FormFactorKind, SolveError, SolverKind, SolverParams,
+};
 use radiant_scene::Scene;
 
 fn all_finite(r: &radiant_radiosity::BakeResult) {
@@ -303,7 +305,7 @@ fn bad_materials_and_parameters_are_typed_errors() {
         .expect("prepares")
         .run_to_end(&mut |_| {})
     {
-        Err(BakeError::Singular) => {}
+        Err(BakeError::Solve(SolveError::Singular)) => {}
         Ok(r) => panic!("expected a singular system, got {:?}", &r.radiosity[..2]),
         Err(e) => panic!("expected a singular system, got {e}"),
     }

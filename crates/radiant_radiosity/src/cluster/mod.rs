@@ -38,10 +38,12 @@ use radiant_scene::Scene;
 use radiant_visibility::Bvh;
 
 use crate::BakeError;
-use crate::bake::{BakeParams, BakeReport, BakeResult, PhaseTimes, TimelinePoint};
 use crate::form_factors::FormFactorKind;
 use crate::mesh::Mesh;
 use crate::metrics::surface_means;
+use crate::params::BakeParams;
+use crate::report::{BakeReport, BakeResult, PhaseTimes, TimelinePoint};
+use crate::solve::{Info, SolveError, Stall};
 use crate::solvers::SolverKind;
 use crate::system::{Rgb, System};
 
@@ -165,10 +167,9 @@ pub struct Sweep<'a> {
     pub reflectance: &'a [Rgb],
     /// Per element: inside closed geometry (seen by nothing).
     pub enclosed: &'a [bool],
-    /// Sweeps so far.
-    pub iterations: u64,
-    /// The estimated relative error of `radiosity` (the bake's residual).
-    pub residual: f64,
+    /// Sweeps so far, the estimated relative error of `radiosity` (the bake's residual) and
+    /// the progress toward the tolerance.
+    pub info: Info,
     /// Links.
     pub links: usize,
     /// Seconds since the bake started.
@@ -233,14 +234,9 @@ pub fn bake_watched(
     mut watch: Watch<'_>,
 ) -> Result<BakeResult, BakeError> {
     let started = Instant::now();
-    let static_part;
-    let scene = if scene.surfaces.iter().any(|s| s.dynamic) {
-        static_part = scene.static_part();
-        &static_part
-    } else {
-        scene
-    };
-    crate::bake::validate(scene)?;
+    let scene = crate::input::static_scene(scene);
+    let scene = scene.as_ref();
+    crate::input::validate(scene)?;
     check(params, cp)?;
     let mut times = PhaseTimes::default();
     let mut budget = Budget::new(cp.memory_limit);
@@ -260,7 +256,8 @@ pub fn bake_watched(
     budget.reserve("the ray-tracing BVH", mesh.roots.len() as u64 * 160)?;
     times.meshing = lap.elapsed().as_secs_f64();
     lap = Instant::now();
-    let bvh = crate::input::visibility(&mesh, crate::input::masks(scene).as_ref());
+    let masks = crate::input::masks(scene);
+    let bvh = crate::input::visibility(&mesh, masks.as_ref());
     let tree = tree::Tree::new(&mesh);
     times.visibility = lap.elapsed().as_secs_f64();
     tracing::info!(
@@ -271,18 +268,14 @@ pub fn bake_watched(
     );
 
     lap = Instant::now();
-    let textures = crate::input::element_textures(scene, &mesh);
-    let (rho, emission) = crate::input::materials(&scene.surfaces, &mesh, textures.as_ref());
-    let direct =
-        crate::input::direct_irradiance(&scene.lights, scene.sky.as_ref(), &mesh, &bvh, &params.ff);
-    let source = crate::input::sources(&rho, &emission, direct.as_deref());
-    drop(direct);
+    let (rho, source) = crate::input::Lighting::new(scene, &mesh, &bvh, masks, &params.ff)
+        .terms(&scene.surfaces, &mesh);
     times.direct_light = lap.elapsed().as_secs_f64();
     let mut warnings = scene.warnings();
     let has_emitters = source.iter().any(|s| s.iter().any(|&v| v > 0.0));
     lap = Instant::now();
     let dead = if has_emitters {
-        crate::bake::enclosed_elements(&mesh, &bvh, params.ff.seed)
+        crate::hierarchy::enclosed_elements(&mesh, &bvh, params.ff.seed)
     } else {
         warnings.push("no emitters and no lights: nothing to bake, all radiosity is 0".into());
         vec![false; n]
@@ -317,10 +310,12 @@ pub fn bake_watched(
     lap = Instant::now();
     let mut b = sys.source.clone();
     let mut timeline = Vec::new();
-    let (mut iterations, mut residual, mut converged) = (0u64, 0.0f64, !has_emitters);
-    let (mut best, mut since_best, mut last_update) = (f64::INFINITY, 0u32, f64::NAN);
+    let (mut info, mut stalled) = (Info::nothing_to_solve(), None);
+    info.converged = !has_emitters;
+    let mut stall = Stall::default();
+    let mut last_update = f64::NAN;
     let tol = params.solver_params.tolerance;
-    while has_emitters && iterations < u64::from(cp.max_sweeps) {
+    while has_emitters && info.iterations < u64::from(cp.max_sweeps) {
         let nb = sys.sweep(&b);
         let diff: Vec<Rgb> = nb
             .iter()
@@ -337,7 +332,7 @@ pub fn bake_watched(
             .collect();
         let (dn, bn) = (sys.norm(&diff), sys.norm(&bounced));
         b = nb;
-        iterations += 1;
+        let iterations = info.iterations + 1;
         let update = if bn > 0.0 { dn / bn } else { 0.0 };
         // The error after a sweep is about update × q / (1 − q), q the observed contraction.
         let q = if last_update > 0.0 {
@@ -346,11 +341,16 @@ pub fn bake_watched(
             0.5
         };
         last_update = update;
-        residual = update * q / (1.0 - q);
+        let residual = update * q / (1.0 - q);
+        // The residual is already an error estimate: contraction 0 keeps it as it is.
+        let converged = residual <= tol && iterations >= 2;
+        info = Info::from_residual(iterations, residual, 0.0, 0.0, tol, converged);
         if !residual.is_finite() {
-            return Err(BakeError::InvalidScene(
-                "the solve diverged (a non-finite radiosity)".into(),
-            ));
+            return Err(SolveError::Diverged {
+                residual,
+                iterations,
+            }
+            .into());
         }
         timeline.push(TimelinePoint {
             t_s: started.elapsed().as_secs_f64(),
@@ -365,8 +365,7 @@ pub fn bake_watched(
                 radiosity: &b,
                 reflectance: &sys.rho,
                 enclosed: sys.enclosed(),
-                iterations,
-                residual,
+                info,
                 links: sys.links(),
                 seconds: started.elapsed().as_secs_f64(),
             });
@@ -374,20 +373,13 @@ pub fn bake_watched(
         if watch.stopped() {
             return Err(BakeError::Stopped);
         }
-        if residual <= tol && iterations >= 2 {
-            converged = true;
+        if converged {
             break;
         }
-        if residual < 0.99 * best {
-            (best, since_best) = (residual, 0);
-        } else {
-            since_best += 1;
-            if since_best >= crate::bake::STALL_STEPS {
-                warnings.push(format!(
-                    "the solver stopped converging (residual {residual:.2e}); reflectance 1 in a closed scene?"
-                ));
-                break;
-            }
+        if let Err(e) = stall.observe(residual, iterations) {
+            warnings.push(e.to_string());
+            stalled = Some(e);
+            break;
         }
         if params
             .time_limit
@@ -397,7 +389,12 @@ pub fn bake_watched(
         }
     }
     times.solve = lap.elapsed().as_secs_f64();
-    tracing::info!(iterations, residual, converged, "clustered bake: solved");
+    tracing::info!(
+        iterations = info.iterations,
+        residual = info.residual,
+        converged = info.converged,
+        "clustered bake: solved"
+    );
 
     let (cluster_receiver_links, cluster_source_links) = sys.cluster_links();
     let report = BakeReport {
@@ -408,12 +405,13 @@ pub fn bake_watched(
         solver: SolverKind::Jacobi,
         form_factors: params.form_factors,
         times,
-        iterations,
-        converged,
-        residual,
+        iterations: info.iterations,
+        converged: info.converged,
+        residual: info.residual,
         unshot_fraction: 0.0,
         timeline,
         warnings,
+        stalled,
         has_emitters,
         clusters: Some(ClusterReport {
             clusters: tree.clusters.len(),
@@ -445,13 +443,7 @@ pub fn bake_watched(
 
 fn check(params: &BakeParams, cp: &ClusterParams) -> Result<(), BakeError> {
     let bad = |s: String| Err(BakeError::InvalidParameter(s));
-    let p = &params.solver_params;
-    if !(p.tolerance.is_finite() && p.tolerance > 0.0) {
-        return bad(format!("tolerance {} must be positive", p.tolerance));
-    }
-    if !(params.links.refinement.is_finite() && params.links.refinement > 0.0) {
-        return bad("refinement must be positive".into());
-    }
+    params.check()?;
     if !matches!(
         params.form_factors,
         FormFactorKind::Analytic | FormFactorKind::RayCast
@@ -490,7 +482,7 @@ fn links(
     stop: Option<&AtomicBool>,
 ) -> Result<(Vec<Vec<refine::Link>>, f64), BakeError> {
     let max3 = |v: &Rgb| v[0].max(v[1]).max(v[2]);
-    let (bmesh, _) = crate::bake::estimates(mesh, rho, source, 1.0);
+    let bmesh = crate::hierarchy::Estimates::new(mesh, rho, source, 1.0).bhat;
     let m = mesh.nodes.len();
     let total = tree.len();
     // Clusters: area-weighted means (B̂ A is the cluster's power); mesh nodes keep their max.
