@@ -172,15 +172,9 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         atlas_s
     );
 
-    let clustered = use_clustered(
-        &args.hierarchy,
-        args.spectral,
-        args.checkpoint.is_some(),
-        &scene,
-        &params,
-    )?;
+    let clustered = use_clustered(&args.hierarchy, args.spectral, &scene, &params)?;
     let result = if clustered {
-        bake_clustered(&scene, &params, &args.hierarchy)?
+        bake_clustered(&scene, &params, &args.hierarchy, args.checkpoint.as_deref())?
     } else {
         bake_triangles(&scene, &params, args.checkpoint.as_deref())?
     };
@@ -507,14 +501,12 @@ pub fn run_default() -> anyhow::Result<()> {
 pub(crate) fn use_clustered(
     hierarchy: &crate::HierarchyArgs,
     spectral: bool,
-    checkpoint: bool,
     scene: &radiant::scene::Scene,
     params: &radiant::radiosity::BakeParams,
 ) -> anyhow::Result<bool> {
     use radiant::radiosity::{FormFactorKind, SolverKind};
     let needs_triangles = [
         (spectral, "--spectral"),
-        (checkpoint, "--checkpoint"),
         (
             !matches!(params.solver, SolverKind::GaussSeidel | SolverKind::Jacobi),
             "--method southwell or direct",
@@ -548,13 +540,17 @@ pub(crate) fn use_clustered(
     }
 }
 
-/// A bake with the clustered hierarchy, with progress on a terminal and in the log.
+/// A bake with the clustered hierarchy, with progress on a terminal and in the log. With a
+/// `checkpoint`, it resumes from it when it fits (else says why and bakes afresh), writes it
+/// once the links are built (a crash while solving then loses no refinement) and again at the
+/// end.
 pub(crate) fn bake_clustered(
     scene: &radiant::scene::Scene,
     params: &radiant::radiosity::BakeParams,
     h: &crate::HierarchyArgs,
+    checkpoint: Option<&Path>,
 ) -> anyhow::Result<radiant::radiosity::BakeResult> {
-    use radiant::radiosity::cluster::{self, ClusterParams, Phase};
+    use radiant::radiosity::cluster::{ClusterBake, ClusterParams, Phase, Watch};
     let cp = ClusterParams {
         memory_limit: h.memory_limit,
         samples: h.link_samples,
@@ -562,7 +558,7 @@ pub(crate) fn bake_clustered(
     };
     let pb = progress_bar(1, "links (clustered)");
     let last_log = std::sync::Mutex::new(Instant::now());
-    let result = cluster::bake(scene, params, &cp, &|phase, done, total| {
+    let progress = |phase: Phase, done: usize, total: usize| {
         match phase {
             Phase::Links => {
                 pb.set_length(total as u64);
@@ -579,7 +575,34 @@ pub(crate) fn bake_clustered(
             *t = Instant::now();
             tracing::info!(?phase, done, total, "clustered bake progress");
         }
-    })?;
+    };
+    let resumed = checkpoint.filter(|p| p.exists()).and_then(|path| {
+        match ClusterBake::resume(scene, params, &cp, path) {
+            Ok(b) => {
+                println!("resumed from {} (no links refined)", path.display());
+                Some(b)
+            }
+            Err(e) => {
+                println!("not resuming: {e}; baking from scratch");
+                None
+            }
+        }
+    });
+    let mut bake = match resumed {
+        Some(b) => b,
+        None => {
+            let b = ClusterBake::new(scene, params, &cp, &progress, None)?;
+            if let Some(path) = checkpoint {
+                b.write_checkpoint(path)?;
+            }
+            b
+        }
+    };
+    bake.run_to_end(&progress, &mut Watch::default())?;
+    if let Some(path) = checkpoint {
+        bake.write_checkpoint(path)?;
+    }
+    let result = bake.finish();
     pb.finish_and_clear();
     if let Some(c) = &result.report.clusters {
         println!(

@@ -140,17 +140,12 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
 
     // No emitters: nothing to bake, and nothing is allocated for it.
     let bake = if scene.has_emitters() {
-        let clustered = crate::bake_cmd::use_clustered(
-            &args.hierarchy,
-            false,
-            args.checkpoint.is_some(),
-            &scene,
-            &params,
-        )?;
+        let clustered = crate::bake_cmd::use_clustered(&args.hierarchy, false, &scene, &params)?;
+        let checkpoint = args.checkpoint.as_deref();
         Some(if clustered {
-            crate::bake_cmd::bake_clustered(&scene, &params, &args.hierarchy)?
+            crate::bake_cmd::bake_clustered(&scene, &params, &args.hierarchy, checkpoint)?
         } else {
-            crate::bake_cmd::bake_triangles(&scene, &params, args.checkpoint.as_deref())?
+            crate::bake_cmd::bake_triangles(&scene, &params, checkpoint)?
         })
     } else {
         println!("{source}: no emitters, so no bake; the frame shows punctual lights and emission");

@@ -367,6 +367,32 @@ fn a_checkpoint_lets_the_next_bake_skip_form_factors() {
     for (a, b) in parse(&surfaces_1).iter().zip(parse(&surfaces_2)) {
         assert!((a - b).abs() <= 1e-3 * a.abs().max(1e-3), "{a} vs {b}");
     }
+    // The clustered hierarchy refuses the per-triangle checkpoint (a typed "rebake"), bakes
+    // afresh and writes its own (version 3), which the next clustered bake resumes from.
+    let clustered = || {
+        radiant()
+            .args(["bake", "--builtin", "cornell-box", "--patch-size", "0.3"])
+            .args(["--hierarchy", "clustered", "--checkpoint"])
+            .arg(&ckpt)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .expect("runs")
+    };
+    let fourth = clustered();
+    assert!(fourth.status.success());
+    let stdout = String::from_utf8_lossy(&fourth.stdout);
+    assert!(
+        stdout.contains("not resuming") && stdout.contains("rebake"),
+        "{stdout}"
+    );
+    let fifth = clustered();
+    assert!(fifth.status.success());
+    let stdout = String::from_utf8_lossy(&fifth.stdout);
+    assert!(
+        stdout.contains("resumed from") && stdout.contains("no links refined"),
+        "{stdout}"
+    );
     // A checkpoint of another scene is not used.
     std::fs::write(&ckpt, b"garbage").expect("write");
     let third = bake();

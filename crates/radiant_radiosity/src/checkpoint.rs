@@ -1,5 +1,13 @@
 //! Bake checkpoints: the links (form factors), the enclosed-element flags and the solution,
 //! written atomically, so a long bake resumes after a restart without recomputing form factors.
+//! Versions 1 and 2 hold a per-triangle hierarchy ([`read`], [`write`]), version 3 a clustered
+//! one ([`read_clustered`], [`write_clustered`]); each reader refuses the other's files with
+//! [`BakeError::CheckpointHierarchy`].
+//!
+//! Version 3, little-endian: the magic and version; the fingerprint, element, node (mesh nodes
+//! and clusters) and link counts, and the refinement threshold the links were built with; row
+//! offsets (u64, one per node and one more), sources (u32), form factors (f32), enclosed flags
+//! (u8), radiosity (3 × f64 per element); an FNV-1a checksum.
 //!
 //! Layout (version 2), little-endian: 16-byte magic and version; the fingerprint of the
 //! geometry, lights and every parameter the links depend on; element, node, link and fully
@@ -15,6 +23,7 @@ use std::io::Write;
 use std::path::Path;
 
 use crate::BakeError;
+use crate::cluster::solve::{Rows, RowsRef};
 use crate::hierarchy::{Estimates, Hierarchy};
 use crate::links::Links;
 use crate::mesh::Mesh;
@@ -24,6 +33,8 @@ use crate::system::Rgb;
 /// The magic, without its last byte: the version.
 const MAGIC: &[u8; 15] = b"RADIANT-BAKE\0\0\0";
 const VERSION: u8 = 2;
+/// The version of clustered checkpoints.
+const VERSION_CLUSTERED: u8 = 3;
 
 /// What a checkpoint restores.
 pub struct Saved {
@@ -68,7 +79,6 @@ pub fn write(
     radiosity: &[Rgb],
 ) -> Result<(), BakeError> {
     let (fingerprint, dead) = (hierarchy.fingerprint, &hierarchy.dead);
-    let io = |e: std::io::Error| BakeError::Checkpoint(format!("{}: {e}", path.display()));
     let n = radiosity.len();
     let hidden = links.hidden_known();
     let oracle = hierarchy.oracle.as_ref().filter(|o| o.bhat.len() == nodes);
@@ -116,22 +126,7 @@ pub fn write(
             buf.extend_from_slice(&b.to_le_bytes());
         }
     }
-    let mut h = Fnv::new();
-    h.bytes(&buf);
-    buf.extend_from_slice(&h.0.to_le_bytes());
-    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let n_tmp = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let name = path
-        .file_name()
-        .map_or_else(|| "checkpoint".into(), |n| n.to_string_lossy().into_owned());
-    let tmp = path.with_file_name(format!(".{name}.tmp.{}.{n_tmp}", std::process::id()));
-    {
-        let mut f = std::fs::File::create(&tmp).map_err(io)?;
-        f.write_all(&buf).map_err(io)?;
-        f.sync_all().map_err(io)?;
-    }
-    std::fs::rename(&tmp, path).map_err(io)?;
-    Ok(())
+    write_atomically(path, buf)
 }
 
 /// Reads little-endian values off a checked byte slice.
@@ -166,6 +161,9 @@ impl Cursor<'_> {
 pub fn read(path: &Path) -> Result<Saved, BakeError> {
     let bad = |what: &str| BakeError::Checkpoint(format!("{}: {what}", path.display()));
     let data = std::fs::read(path).map_err(|e| bad(&e.to_string()))?;
+    if data.len() >= 16 && &data[..15] == MAGIC && data[15] == VERSION_CLUSTERED {
+        return Err(other_hierarchy(path, VERSION_CLUSTERED));
+    }
     if data.len() < 16 + 32 + 8 || &data[..15] != MAGIC || !matches!(data[15], 1 | 2) {
         return Err(bad("not a Radiant bake checkpoint (or another version)"));
     }
@@ -261,6 +259,159 @@ pub fn read(path: &Path) -> Result<Saved, BakeError> {
         },
         radiosity,
     })
+}
+
+fn other_hierarchy(path: &Path, version: u8) -> BakeError {
+    let (found, needed) = if version == VERSION_CLUSTERED {
+        ("clustered", "per-triangle")
+    } else {
+        ("per-triangle", "clustered")
+    };
+    BakeError::CheckpointHierarchy {
+        path: path.display().to_string(),
+        version,
+        found,
+        needed,
+    }
+}
+
+/// What a clustered checkpoint holds.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SavedClustered {
+    /// The fingerprint of the geometry and parameters the links were built for.
+    pub fingerprint: u64,
+    /// The refinement threshold the links were built with (larger than asked when the memory
+    /// budget coarsened the bake).
+    pub refinement: f64,
+    /// Nodes (mesh nodes and clusters).
+    pub nodes: usize,
+    /// The links.
+    pub rows: Rows,
+    /// Per element: inside closed geometry.
+    pub dead: Vec<bool>,
+    /// Radiosity per element.
+    pub radiosity: Vec<Rgb>,
+}
+
+/// Writes a clustered checkpoint atomically.
+pub fn write_clustered(
+    path: &Path,
+    fingerprint: u64,
+    refinement: f64,
+    rows: RowsRef,
+    dead: &[bool],
+    radiosity: &[Rgb],
+) -> Result<(), BakeError> {
+    let (n, nodes, nl) = (radiosity.len(), rows.row.len() - 1, rows.src.len());
+    let mut buf: Vec<u8> = Vec::new();
+    let size = 16 + 40 + (nodes + 1) * 8 + nl * 8 + n * 25 + 8;
+    buf.try_reserve_exact(size)
+        .map_err(|_| BakeError::OutOfMemory {
+            what: "the checkpoint's buffer",
+            needed: size as u64,
+            limit: 0,
+        })?;
+    buf.extend_from_slice(MAGIC);
+    buf.push(VERSION_CLUSTERED);
+    for v in [
+        fingerprint,
+        n as u64,
+        nodes as u64,
+        nl as u64,
+        refinement.to_bits(),
+    ] {
+        buf.extend_from_slice(&v.to_le_bytes());
+    }
+    rows.row
+        .iter()
+        .for_each(|r| buf.extend_from_slice(&r.to_le_bytes()));
+    rows.src
+        .iter()
+        .for_each(|s| buf.extend_from_slice(&s.to_le_bytes()));
+    rows.ff
+        .iter()
+        .for_each(|f| buf.extend_from_slice(&f.to_le_bytes()));
+    buf.extend(dead.iter().map(|&d| u8::from(d)));
+    radiosity
+        .iter()
+        .flatten()
+        .for_each(|c| buf.extend_from_slice(&c.to_le_bytes()));
+    write_atomically(path, buf)
+}
+
+/// Reads and checks a clustered checkpoint (sizes before allocation, structure, finite
+/// values); a per-triangle one is [`BakeError::CheckpointHierarchy`].
+pub fn read_clustered(path: &Path) -> Result<SavedClustered, BakeError> {
+    let bad = |what: &str| BakeError::Checkpoint(format!("{}: {what}", path.display()));
+    let data = std::fs::read(path).map_err(|e| bad(&e.to_string()))?;
+    if data.len() >= 16 && &data[..15] == MAGIC && matches!(data[15], 1 | 2) {
+        return Err(other_hierarchy(path, data[15]));
+    }
+    if data.len() < 16 + 40 + 8 || &data[..15] != MAGIC || data[15] != VERSION_CLUSTERED {
+        return Err(bad("not a Radiant bake checkpoint (or another version)"));
+    }
+    let (body, sum) = data.split_at(data.len() - 8);
+    let mut h = Fnv::new();
+    h.bytes(body);
+    if sum != h.0.to_le_bytes() {
+        return Err(bad("checksum mismatch: the file is damaged"));
+    }
+    let mut c = Cursor { data: body, at: 16 };
+    let fingerprint = c.u64();
+    let (n, nodes, nl) = (c.u64(), c.u64(), c.u64());
+    let refinement = c.f64();
+    let (n128, nodes128, nl128) = (u128::from(n), u128::from(nodes), u128::from(nl));
+    let expected = 16 + 40 + (nodes128 + 1) * 8 + nl128 * 8 + n128 * 25;
+    if expected != body.len() as u128 {
+        return Err(bad("sizes do not match the file length"));
+    }
+    let (n, nodes, nl) = (n as usize, nodes as usize, nl as usize);
+    let row: Vec<u64> = (0..=nodes).map(|_| c.u64()).collect();
+    let src: Vec<u32> = (0..nl).map(|_| c.u32()).collect();
+    let ff: Vec<f32> = (0..nl).map(|_| c.f32()).collect();
+    let dead: Vec<bool> = (0..n).map(|_| c.take::<1>()[0] != 0).collect();
+    let radiosity: Vec<Rgb> = (0..n).map(|_| [c.f64(), c.f64(), c.f64()]).collect();
+    let header_ok = row.first() == Some(&0)
+        && row.last() == Some(&(nl as u64))
+        && row.windows(2).all(|w| w[0] <= w[1])
+        && refinement.is_finite()
+        && refinement > 0.0;
+    if !header_ok
+        || src.iter().any(|&s| s as usize >= nodes)
+        || ff.iter().any(|f| !f.is_finite() || *f < 0.0)
+        || radiosity.iter().flatten().any(|b| !b.is_finite())
+    {
+        return Err(bad("inconsistent contents"));
+    }
+    Ok(SavedClustered {
+        fingerprint,
+        refinement,
+        nodes,
+        rows: Rows { row, src, ff },
+        dead,
+        radiosity,
+    })
+}
+
+/// Appends the checksum and writes `buf` to `path` atomically (temporary file, fsync, rename).
+fn write_atomically(path: &Path, mut buf: Vec<u8>) -> Result<(), BakeError> {
+    let io = |e: std::io::Error| BakeError::Checkpoint(format!("{}: {e}", path.display()));
+    let mut h = Fnv::new();
+    h.bytes(&buf);
+    buf.extend_from_slice(&h.0.to_le_bytes());
+    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n_tmp = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let name = path
+        .file_name()
+        .map_or_else(|| "checkpoint".into(), |n| n.to_string_lossy().into_owned());
+    let tmp = path.with_file_name(format!(".{name}.tmp.{}.{n_tmp}", std::process::id()));
+    {
+        let mut f = std::fs::File::create(&tmp).map_err(io)?;
+        f.write_all(&buf).map_err(io)?;
+        f.sync_all().map_err(io)?;
+    }
+    std::fs::rename(&tmp, path).map_err(io)?;
+    Ok(())
 }
 
 #[cfg(test)]

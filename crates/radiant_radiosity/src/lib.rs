@@ -115,6 +115,22 @@ pub enum BakeError {
     /// A checkpoint could not be written, read, or does not fit this scene.
     #[error("checkpoint: {0}")]
     Checkpoint(String),
+    /// A checkpoint of the other hierarchy (a per-triangle bake's, version 1 or 2, read by a
+    /// clustered bake, or the reverse): nothing is wrong with the file, but this bake cannot
+    /// use it. Bake again (the new bake writes its own).
+    #[error(
+        "checkpoint {path}: written by the {found} hierarchy (version {version}), this bake uses the {needed} one: rebake"
+    )]
+    CheckpointHierarchy {
+        /// The file.
+        path: String,
+        /// The file's format version.
+        version: u8,
+        /// The hierarchy that wrote it.
+        found: &'static str,
+        /// The hierarchy of this bake.
+        needed: &'static str,
+    },
     /// The caller stopped the bake (a clustered bake's [`cluster::Watch::stop`]).
     #[error("the bake was stopped before it finished")]
     Stopped,

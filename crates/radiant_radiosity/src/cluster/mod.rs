@@ -22,30 +22,33 @@
 //! and then refuses with the same typed error. Large buffers are reserved with
 //! `try_reserve`, so an allocator's refusal is that error too, never an abort.
 //!
-//! What it does not do yet (the per-triangle [`crate::Bake`] does): geometry and light edits,
-//! checkpoints, the spectral solve, the hemicube and Monte Carlo form-factor methods (they
-//! gather a whole receiver's row at once, which a two-sided hierarchy does not have).
+//! [`ClusterBake`] is the same engine shape as the per-triangle [`crate::Bake`]: built (or
+//! resumed from a version-3 checkpoint), then stepped one sweep at a time ([`solve::Info`], the
+//! stopping rule of [`crate::solve::Stall`]); material and light edits keep its links. What it
+//! does not do yet (the per-triangle bake does): geometry edits, the spectral solve, the
+//! hemicube and Monte Carlo form-factor methods (they gather a whole receiver's row at once,
+//! which a two-sided hierarchy does not have).
 
+mod bake;
 pub mod refine;
 pub mod sh;
 pub mod solve;
 pub mod tree;
 
+pub use bake::ClusterBake;
+
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
 
 use radiant_scene::Scene;
-use radiant_visibility::Bvh;
 
 use crate::BakeError;
 use crate::form_factors::FormFactorKind;
 use crate::mesh::Mesh;
-use crate::metrics::surface_means;
 use crate::params::BakeParams;
-use crate::report::{BakeReport, BakeResult, PhaseTimes, TimelinePoint};
-use crate::solve::{Info, SolveError, Stall};
+use crate::report::BakeResult;
+use crate::solve::Info;
 use crate::solvers::SolverKind;
-use crate::system::{Rgb, System};
+use crate::system::Rgb;
 
 /// Settings of the clustered hierarchy that the per-triangle bake does not have.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -221,11 +224,12 @@ pub fn bake(
     bake_watched(scene, params, cp, progress, Watch::default())
 }
 
-/// Bakes `scene` with the clustered hierarchy. `params` gives the meshing (element size =
-/// patch size / 2^element levels), the threshold (`links.refinement`), the form-factor method
-/// (analytic or ray-cast between triangles), the seed, the tolerance and the time limit.
-/// `progress(phase, done, total)` is called as the bake advances, also from worker threads.
-/// `watch` sees the solution after every sweep and can stop the bake.
+/// Bakes `scene` with the clustered hierarchy ([`ClusterBake`] run to the end). `params` gives
+/// the meshing (element size = patch size / 2^element levels), the threshold
+/// (`links.refinement`), the form-factor method (analytic or ray-cast between triangles), the
+/// seed, the tolerance and the time limit. `progress(phase, done, total)` is called as the
+/// bake advances, also from worker threads. `watch` sees the solution after every sweep and
+/// can stop the bake.
 pub fn bake_watched(
     scene: &Scene,
     params: &BakeParams,
@@ -233,212 +237,9 @@ pub fn bake_watched(
     progress: &(dyn Fn(Phase, usize, usize) + Sync),
     mut watch: Watch<'_>,
 ) -> Result<BakeResult, BakeError> {
-    let started = Instant::now();
-    let scene = crate::input::static_scene(scene);
-    let scene = scene.as_ref();
-    crate::input::validate(scene)?;
-    check(params, cp)?;
-    let mut times = PhaseTimes::default();
-    let mut budget = Budget::new(cp.memory_limit);
-    let mut lap = Instant::now();
-    let mesh = Mesh::adaptive(scene, &params.mesh, &mut |b| budget.reserve("the mesh", b))?;
-    let n = mesh.element_count();
-    // Per element: reflectance, source, area, solution twice; per node: tree geometry and
-    // three solver buffers.
-    let nodes = (mesh.nodes.len() + mesh.roots.len()) as u64;
-    budget.reserve("the element buffers", n as u64 * (24 * 4 + 16))?;
-    budget.reserve("the cluster tree", nodes * (24 * 5 + 8 * 4))?;
-    // Per cluster: its normals' harmonics, and two harmonics buffers of the solve.
-    budget.reserve(
-        "the cluster buffers",
-        mesh.roots.len() as u64 * (72 + 2 * 216),
-    )?;
-    budget.reserve("the ray-tracing BVH", mesh.roots.len() as u64 * 160)?;
-    times.meshing = lap.elapsed().as_secs_f64();
-    lap = Instant::now();
-    let masks = crate::input::masks(scene);
-    let bvh = crate::input::visibility(&mesh, masks.as_ref());
-    let tree = tree::Tree::new(&mesh);
-    times.visibility = lap.elapsed().as_secs_f64();
-    tracing::info!(
-        elements = n,
-        triangles = mesh.roots.len(),
-        clusters = tree.clusters.len(),
-        "clustered bake: meshed"
-    );
-
-    lap = Instant::now();
-    let (rho, source) = crate::input::Lighting::new(scene, &mesh, &bvh, masks, &params.ff)
-        .terms(&scene.surfaces, &mesh);
-    times.direct_light = lap.elapsed().as_secs_f64();
-    let mut warnings = scene.warnings();
-    let has_emitters = source.iter().any(|s| s.iter().any(|&v| v > 0.0));
-    lap = Instant::now();
-    let dead = if has_emitters {
-        crate::hierarchy::enclosed_elements(&mesh, &bvh, params.ff.seed)
-    } else {
-        warnings.push("no emitters and no lights: nothing to bake, all radiosity is 0".into());
-        vec![false; n]
-    };
-    let enclosed = dead.iter().filter(|&&d| d).count();
-    let (parts, eps_used) = if has_emitters {
-        links(
-            &mesh,
-            &tree,
-            &bvh,
-            params,
-            cp,
-            &rho,
-            &source,
-            &mut budget,
-            &mut warnings,
-            progress,
-            watch.stop,
-        )?
-    } else {
-        (Vec::new(), params.links.refinement)
-    };
-    let sys = solve::HierSystem::new(&mesh, &tree, parts, rho, source, dead)?;
-    times.form_factors = lap.elapsed().as_secs_f64();
-    tracing::info!(
-        links = sys.links(),
-        seconds = times.form_factors,
-        "clustered bake: links"
-    );
-
-    // Solve.
-    lap = Instant::now();
-    let mut b = sys.source.clone();
-    let mut timeline = Vec::new();
-    let (mut info, mut stalled) = (Info::nothing_to_solve(), None);
-    info.converged = !has_emitters;
-    let mut stall = Stall::default();
-    let mut last_update = f64::NAN;
-    let tol = params.solver_params.tolerance;
-    while has_emitters && info.iterations < u64::from(cp.max_sweeps) {
-        let nb = sys.sweep(&b);
-        let diff: Vec<Rgb> = nb
-            .iter()
-            .zip(&b)
-            .map(|(x, y)| std::array::from_fn(|c| x[c] - y[c]))
-            .collect();
-        // Relative to the bounced light (b − source), not to b: in a sunlit level the direct
-        // light dominates ‖b‖, and a change measured against it stopped Sponza after 4
-        // sweeps while its shade was still filling in (now 7).
-        let bounced: Vec<Rgb> = nb
-            .iter()
-            .zip(&sys.source)
-            .map(|(x, s)| std::array::from_fn(|c| x[c] - s[c]))
-            .collect();
-        let (dn, bn) = (sys.norm(&diff), sys.norm(&bounced));
-        b = nb;
-        let iterations = info.iterations + 1;
-        let update = if bn > 0.0 { dn / bn } else { 0.0 };
-        // The error after a sweep is about update × q / (1 − q), q the observed contraction.
-        let q = if last_update > 0.0 {
-            (update / last_update).clamp(0.0, 0.9999)
-        } else {
-            0.5
-        };
-        last_update = update;
-        let residual = update * q / (1.0 - q);
-        // The residual is already an error estimate: contraction 0 keeps it as it is.
-        let converged = residual <= tol && iterations >= 2;
-        info = Info::from_residual(iterations, residual, 0.0, 0.0, tol, converged);
-        if !residual.is_finite() {
-            return Err(SolveError::Diverged {
-                residual,
-                iterations,
-            }
-            .into());
-        }
-        timeline.push(TimelinePoint {
-            t_s: started.elapsed().as_secs_f64(),
-            iterations,
-            residual,
-            unshot_fraction: 0.0,
-        });
-        progress(Phase::Solve, iterations as usize, cp.max_sweeps as usize);
-        if let Some(f) = watch.on_sweep.as_mut() {
-            f(&Sweep {
-                mesh: &mesh,
-                radiosity: &b,
-                reflectance: &sys.rho,
-                enclosed: sys.enclosed(),
-                info,
-                links: sys.links(),
-                seconds: started.elapsed().as_secs_f64(),
-            });
-        }
-        if watch.stopped() {
-            return Err(BakeError::Stopped);
-        }
-        if converged {
-            break;
-        }
-        if let Err(e) = stall.observe(residual, iterations) {
-            warnings.push(e.to_string());
-            stalled = Some(e);
-            break;
-        }
-        if params
-            .time_limit
-            .is_some_and(|l| lap.elapsed() >= l.max(Duration::ZERO))
-        {
-            break;
-        }
-    }
-    times.solve = lap.elapsed().as_secs_f64();
-    tracing::info!(
-        iterations = info.iterations,
-        residual = info.residual,
-        converged = info.converged,
-        "clustered bake: solved"
-    );
-
-    let (cluster_receiver_links, cluster_source_links) = sys.cluster_links();
-    let report = BakeReport {
-        patches: n,
-        elements: n,
-        links: sys.links(),
-        link_bytes: sys.link_bytes(),
-        solver: SolverKind::Jacobi,
-        form_factors: params.form_factors,
-        times,
-        iterations: info.iterations,
-        converged: info.converged,
-        residual: info.residual,
-        unshot_fraction: 0.0,
-        timeline,
-        warnings,
-        stalled,
-        has_emitters,
-        clusters: Some(ClusterReport {
-            clusters: tree.clusters.len(),
-            cluster_receiver_links,
-            cluster_source_links,
-            refinement_asked: params.links.refinement,
-            refinement_used: eps_used,
-            memory_limit: budget.limit,
-            memory_estimate: budget.used,
-            enclosed,
-        }),
-    };
-    let surfaces = surface_means(&scene.surfaces, &mesh, &b);
-    let (rho, source, dead) = sys.into_parts();
-    let system = System::new(
-        &mesh,
-        rho,
-        source,
-        crate::links::Links {
-            row: vec![0; n + 1],
-            ..Default::default()
-        },
-        &dead,
-    );
-    Ok(BakeResult::from_parts(
-        mesh, system, b, surfaces, report, dead,
-    ))
+    let mut bake = ClusterBake::new(scene, params, cp, progress, watch.stop)?;
+    bake.run_to_end(progress, &mut watch)?;
+    Ok(bake.finish())
 }
 
 fn check(params: &BakeParams, cp: &ClusterParams) -> Result<(), BakeError> {
@@ -463,101 +264,4 @@ fn check(params: &BakeParams, cp: &ClusterParams) -> Result<(), BakeError> {
         return bad("a memory limit of 0 bytes".into());
     }
     Ok(())
-}
-
-/// Refines the links within the budget, coarsening if allowed; returns them with the
-/// threshold used.
-#[expect(clippy::too_many_arguments, reason = "the inputs of the link build")]
-fn links(
-    mesh: &Mesh,
-    tree: &tree::Tree,
-    bvh: &Bvh,
-    params: &BakeParams,
-    cp: &ClusterParams,
-    rho: &[Rgb],
-    source: &[Rgb],
-    budget: &mut Budget,
-    warnings: &mut Vec<String>,
-    progress: &(dyn Fn(Phase, usize, usize) + Sync),
-    stop: Option<&AtomicBool>,
-) -> Result<(Vec<Vec<refine::Link>>, f64), BakeError> {
-    let max3 = |v: &Rgb| v[0].max(v[1]).max(v[2]);
-    let bmesh = crate::hierarchy::Estimates::new(mesh, rho, source, 1.0).bhat;
-    let m = mesh.nodes.len();
-    let total = tree.len();
-    // Clusters: area-weighted means (B̂ A is the cluster's power); mesh nodes keep their max.
-    let mut bhat = bmesh;
-    bhat.resize(total, 0.0);
-    let mut rmax: Vec<f64> = vec![0.0; total];
-    for (i, &id) in mesh.leaves.iter().enumerate() {
-        rmax[id as usize] = max3(&rho[i]);
-    }
-    for nd in (0..m).rev() {
-        let node = &mesh.nodes[nd];
-        if !node.is_leaf() {
-            rmax[nd] = (0..4)
-                .map(|k| rmax[(node.first_child + k) as usize])
-                .fold(0.0, f64::max);
-        }
-    }
-    for c in (0..tree.clusters.len()).rev() {
-        let cl = &tree.clusters[c];
-        let [a, b] = cl.children.map(|x| x as usize);
-        let id = m + c;
-        let (wa, wb) = (tree.area[a], tree.area[b]);
-        bhat[id] = if wa + wb > 0.0 {
-            (wa * bhat[a] + wb * bhat[b]) / (wa + wb)
-        } else {
-            0.0
-        };
-        rmax[id] = rmax[a].max(rmax[b]);
-    }
-    let asked = params.links.refinement;
-    let mut eps = asked;
-    for attempt in 0..=COARSEN_STEPS {
-        let max_links = budget.left() / solve::LINK_BYTES;
-        let r = refine::Refiner {
-            mesh,
-            tree,
-            vis: bvh,
-            bhat: &bhat,
-            rho: &rmax,
-            eps,
-            kind: params.form_factors,
-            samples: cp.samples,
-            seed: params.ff.seed,
-            max_links,
-            stop,
-        };
-        let t = Instant::now();
-        if let Some(parts) = r.build(&|d, n| progress(Phase::Links, d, n)) {
-            let count: u64 = parts.iter().map(|p| p.len() as u64).sum();
-            budget.reserve("the links", count * solve::LINK_BYTES)?;
-            if attempt > 0 {
-                warnings.push(format!(
-                    "the memory limit of {} MiB made the bake coarser: refinement {eps} instead of {asked}",
-                    budget.limit >> 20
-                ));
-            }
-            return Ok((parts, eps));
-        }
-        if stop.is_some_and(|f| f.load(Ordering::Relaxed)) {
-            return Err(BakeError::Stopped);
-        }
-        tracing::warn!(
-            refinement = eps,
-            seconds = t.elapsed().as_secs_f64(),
-            max_links,
-            "links exceed the memory limit"
-        );
-        if !cp.coarsen {
-            break;
-        }
-        eps *= 4.0;
-    }
-    Err(BakeError::OutOfMemory {
-        what: "the links",
-        needed: budget.used + budget.left() + 1,
-        limit: budget.limit,
-    })
 }

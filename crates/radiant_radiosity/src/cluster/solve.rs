@@ -61,6 +61,29 @@ pub struct HierSystem {
     normal_sh: Vec<[f64; 9]>,
 }
 
+/// Links in compressed rows by receiver node: row `n` is `src[row[n]..row[n + 1]]` with form
+/// factors `ff`, over every node id (mesh nodes, then clusters).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Rows {
+    /// Row offsets, one more than nodes.
+    pub row: Vec<u64>,
+    /// Source node of each link.
+    pub src: Vec<u32>,
+    /// Form factor of each link.
+    pub ff: Vec<f32>,
+}
+
+/// [`Rows`], borrowed.
+#[derive(Clone, Copy, Debug)]
+pub struct RowsRef<'a> {
+    /// Row offsets.
+    pub row: &'a [u64],
+    /// Sources.
+    pub src: &'a [u32],
+    /// Form factors.
+    pub ff: &'a [f32],
+}
+
 /// Per channel, nine harmonics coefficients.
 type Sh3 = [[f64; 9]; 3];
 
@@ -109,6 +132,28 @@ impl HierSystem {
             }
         }
         drop(fill);
+        Ok(Self::from_rows(
+            mesh,
+            tree,
+            Rows { row, src, ff },
+            rho,
+            source,
+            dead,
+        ))
+    }
+
+    /// A system over links already in rows (a checkpoint's), which must fit `tree`: one row
+    /// per node, sources below its node count.
+    pub fn from_rows(
+        mesh: &Mesh,
+        tree: &Tree,
+        rows: Rows,
+        rho: Vec<Rgb>,
+        source: Vec<Rgb>,
+        dead: Vec<bool>,
+    ) -> HierSystem {
+        let nodes = tree.len();
+        let Rows { row, src, ff } = rows;
         let area: Vec<f64> = mesh
             .leaves
             .iter()
@@ -163,7 +208,16 @@ impl HierSystem {
             .map(|(&live, &all)| if live > 0.0 { all / live } else { 1.0 })
             .collect();
         sys.weight = w;
-        Ok(sys)
+        sys
+    }
+
+    /// The links in rows by receiver node.
+    pub fn rows(&self) -> RowsRef<'_> {
+        RowsRef {
+            row: &self.row,
+            src: &self.src,
+            ff: &self.ff,
+        }
     }
 
     fn cluster(&self, n: usize) -> Option<[u32; 2]> {

@@ -1,0 +1,586 @@
+//! The clustered bake as an engine: built (or resumed), stepped a sweep at a time, edited, and
+//! finished into a [`BakeResult`].
+
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use radiant_scene::{Light, Scene, Sky, Surface};
+use radiant_visibility::Bvh;
+
+use super::solve::{HierSystem, LINK_BYTES};
+use super::tree::Tree;
+use super::{
+    Budget, COARSEN_STEPS, ClusterParams, ClusterReport, Phase, Sweep, Watch, check, refine,
+};
+use crate::BakeError;
+use crate::input::{self, Lighting};
+use crate::mesh::Mesh;
+use crate::metrics::surface_means;
+use crate::params::BakeParams;
+use crate::report::{BakeReport, BakeResult, PhaseTimes, TimelinePoint};
+use crate::rng::Fnv;
+use crate::solve::{Info, SolveError, Stall};
+use crate::solvers::SolverKind;
+use crate::system::{Rgb, System};
+
+/// A clustered bake in progress: the mesh, the cluster tree and the links at every level, and
+/// the Jacobi sweeps over them.
+pub struct ClusterBake {
+    mesh: Mesh,
+    tree: Tree,
+    sys: HierSystem,
+    surfaces: Vec<Surface>,
+    lighting: Lighting,
+    params: BakeParams,
+    cp: ClusterParams,
+    /// The fingerprint of geometry and link parameters, for checkpoints.
+    fingerprint: u64,
+    /// The threshold the links were built with.
+    refinement_used: f64,
+    budget: Budget,
+    has_emitters: bool,
+    resumed: bool,
+    b: Vec<Rgb>,
+    sweeps: Sweeps,
+    started: Instant,
+    times: PhaseTimes,
+    warnings: Vec<String>,
+}
+
+/// Where the sweeps stand.
+struct Sweeps {
+    info: Info,
+    stall: Stall,
+    /// The last sweep's update (NaN before the first sweep since the start or an edit).
+    last_update: f64,
+    /// Sweeps since the start or the last edit.
+    since_start: u64,
+    stalled: Option<SolveError>,
+    timeline: Vec<TimelinePoint>,
+    solving: Duration,
+}
+
+impl Sweeps {
+    fn new(has_emitters: bool) -> Sweeps {
+        let mut info = Info::nothing_to_solve();
+        info.converged = !has_emitters;
+        Sweeps {
+            info,
+            stall: Stall::default(),
+            last_update: f64::NAN,
+            since_start: 0,
+            stalled: None,
+            timeline: Vec::new(),
+            solving: Duration::ZERO,
+        }
+    }
+}
+
+/// The fingerprint of what clustered links depend on: the per-triangle bake's, and the
+/// visibility samples per link.
+fn fingerprint(scene: &Scene, params: &BakeParams, cp: &ClusterParams) -> u64 {
+    let mut h = Fnv(crate::hierarchy::fingerprint(scene, params));
+    h.bytes(b"clustered");
+    h.bytes(&cp.samples.to_le_bytes());
+    h.0
+}
+
+/// Reserves the buffers of a mesh's bake from the budget, before they are allocated.
+fn reserve_buffers(mesh: &Mesh, budget: &mut Budget) -> Result<(), BakeError> {
+    let n = mesh.element_count() as u64;
+    // Per element: reflectance, source, area, solution twice; per node: tree geometry and
+    // three solver buffers.
+    let nodes = (mesh.nodes.len() + mesh.roots.len()) as u64;
+    budget.reserve("the element buffers", n * (24 * 4 + 16))?;
+    budget.reserve("the cluster tree", nodes * (24 * 5 + 8 * 4))?;
+    // Per cluster: its normals' harmonics, and two harmonics buffers of the solve.
+    budget.reserve(
+        "the cluster buffers",
+        mesh.roots.len() as u64 * (72 + 2 * 216),
+    )?;
+    budget.reserve("the ray-tracing BVH", mesh.roots.len() as u64 * 160)?;
+    // Kept for edits: direct light and the textures' footprints.
+    budget.reserve("the lighting kept for edits", n * 24 * 3)
+}
+
+impl ClusterBake {
+    /// Prepares a bake: mesh, clusters, direct light and links within the memory budget.
+    /// `progress` is called while links are refined; `stop` is polled then (the bake returns
+    /// [`BakeError::Stopped`]).
+    pub fn new(
+        scene: &Scene,
+        params: &BakeParams,
+        cp: &ClusterParams,
+        progress: &(dyn Fn(Phase, usize, usize) + Sync),
+        stop: Option<&AtomicBool>,
+    ) -> Result<ClusterBake, BakeError> {
+        Self::build(scene, params, cp, progress, stop, None)
+    }
+
+    /// Resumes from a checkpoint written by [`ClusterBake::write_checkpoint`] for the same
+    /// geometry and link parameters: no links are refined, and the sweeps continue from the
+    /// saved radiosity under the scene's current materials and lights. A per-triangle
+    /// checkpoint is [`BakeError::CheckpointHierarchy`]; one for other geometry, or a damaged
+    /// one, [`BakeError::Checkpoint`].
+    pub fn resume(
+        scene: &Scene,
+        params: &BakeParams,
+        cp: &ClusterParams,
+        path: &Path,
+    ) -> Result<ClusterBake, BakeError> {
+        let saved = crate::checkpoint::read_clustered(path)?;
+        Self::build(scene, params, cp, &|_, _, _| {}, None, Some(saved))
+    }
+
+    fn build(
+        scene: &Scene,
+        params: &BakeParams,
+        cp: &ClusterParams,
+        progress: &(dyn Fn(Phase, usize, usize) + Sync),
+        stop: Option<&AtomicBool>,
+        saved: Option<crate::checkpoint::SavedClustered>,
+    ) -> Result<ClusterBake, BakeError> {
+        let started = Instant::now();
+        let scene = input::static_scene(scene);
+        let scene = scene.as_ref();
+        input::validate(scene)?;
+        check(params, cp)?;
+        let fingerprint = fingerprint(scene, params, cp);
+        if saved.as_ref().is_some_and(|s| s.fingerprint != fingerprint) {
+            return Err(BakeError::Checkpoint(
+                "it was written for other geometry or bake parameters".into(),
+            ));
+        }
+        let mut times = PhaseTimes::default();
+        let mut budget = Budget::new(cp.memory_limit);
+        let mut t = Instant::now();
+        let mut lap = || {
+            std::mem::replace(&mut t, Instant::now())
+                .elapsed()
+                .as_secs_f64()
+        };
+        let mesh = Mesh::adaptive(scene, &params.mesh, &mut |b| budget.reserve("the mesh", b))?;
+        reserve_buffers(&mesh, &mut budget)?;
+        times.meshing = lap();
+        let masks = input::masks(scene);
+        let bvh = input::visibility(&mesh, masks.as_ref());
+        let tree = Tree::new(&mesh);
+        times.visibility = lap();
+        tracing::info!(
+            elements = mesh.element_count(),
+            triangles = mesh.roots.len(),
+            clusters = tree.clusters.len(),
+            "clustered bake: meshed"
+        );
+        let lighting = Lighting::new(scene, &mesh, &bvh, masks, &params.ff);
+        let (rho, source) = lighting.terms(&scene.surfaces, &mesh);
+        times.direct_light = lap();
+        let mut warnings = scene.warnings();
+        let has_emitters = source.iter().flatten().any(|&v| v > 0.0);
+        let n = mesh.element_count();
+        let resumed = saved.is_some();
+        let (sys, refinement_used, b) = match saved {
+            Some(sv) => {
+                if sv.dead.len() != n || sv.nodes != tree.len() {
+                    return Err(BakeError::Checkpoint(
+                        "its element hierarchy differs from this scene's".into(),
+                    ));
+                }
+                budget.reserve("the links", sv.rows.src.len() as u64 * LINK_BYTES)?;
+                let sys = HierSystem::from_rows(&mesh, &tree, sv.rows, rho, source, sv.dead);
+                (sys, sv.refinement, Some(sv.radiosity))
+            }
+            None if has_emitters => {
+                let dead = crate::hierarchy::enclosed_elements(&mesh, &bvh, params.ff.seed);
+                let inputs = (&mesh, &tree, &bvh, &rho[..], &source[..]);
+                let (parts, eps) = refine_within_budget(
+                    inputs,
+                    params,
+                    cp,
+                    &mut budget,
+                    &mut warnings,
+                    progress,
+                    stop,
+                )?;
+                let sys = HierSystem::new(&mesh, &tree, parts, rho, source, dead)?;
+                (sys, eps, None)
+            }
+            None => {
+                warnings
+                    .push("no emitters and no lights: nothing to bake, all radiosity is 0".into());
+                let sys = HierSystem::new(&mesh, &tree, Vec::new(), rho, source, vec![false; n])?;
+                (sys, params.links.refinement, None)
+            }
+        };
+        times.form_factors = lap();
+        tracing::info!(
+            links = sys.links(),
+            seconds = times.form_factors,
+            resumed,
+            "clustered bake: links"
+        );
+        let b = b.unwrap_or_else(|| sys.source.clone());
+        Ok(ClusterBake {
+            mesh,
+            tree,
+            sys,
+            surfaces: scene.surfaces.clone(),
+            lighting,
+            params: *params,
+            cp: *cp,
+            fingerprint,
+            refinement_used,
+            budget,
+            has_emitters,
+            resumed,
+            b,
+            sweeps: Sweeps::new(has_emitters),
+            started,
+            times,
+            warnings,
+        })
+    }
+
+    /// One Jacobi sweep of gather and push-pull. The estimated error is the sweep's update
+    /// times `q / (1 − q)`, `q` the observed contraction, relative to the bounced light
+    /// (`b − source`: in a sunlit level the direct light dominates `‖b‖`, and a change
+    /// measured against it stopped Sponza after 4 sweeps while its shade was still filling
+    /// in). A solve that stalls or diverges is an error.
+    pub fn step(&mut self) -> Result<Info, SolveError> {
+        if !self.has_emitters {
+            return Ok(Info::nothing_to_solve());
+        }
+        let t = Instant::now();
+        let nb = self.sys.sweep(&self.b);
+        let diff: Vec<Rgb> = (nb.iter().zip(&self.b))
+            .map(|(x, y)| std::array::from_fn(|c| x[c] - y[c]))
+            .collect();
+        let bounced: Vec<Rgb> = (nb.iter().zip(&self.sys.source))
+            .map(|(x, s)| std::array::from_fn(|c| x[c] - s[c]))
+            .collect();
+        let (dn, bn) = (self.sys.norm(&diff), self.sys.norm(&bounced));
+        self.b = nb;
+        let s = &mut self.sweeps;
+        s.since_start += 1;
+        let iterations = s.info.iterations + 1;
+        let update = if bn > 0.0 { dn / bn } else { 0.0 };
+        let q = if s.last_update > 0.0 {
+            (update / s.last_update).clamp(0.0, 0.9999)
+        } else {
+            0.5
+        };
+        s.last_update = update;
+        let residual = update * q / (1.0 - q);
+        let tol = self.params.solver_params.tolerance;
+        let converged = residual <= tol && s.since_start >= 2;
+        // The residual is already an error estimate: contraction 0 keeps it as it is.
+        s.info = Info::from_residual(iterations, residual, 0.0, 0.0, tol, converged);
+        s.solving += t.elapsed();
+        if !residual.is_finite() {
+            return Err(SolveError::Diverged {
+                residual,
+                iterations,
+            });
+        }
+        s.timeline.push(TimelinePoint {
+            t_s: self.started.elapsed().as_secs_f64(),
+            iterations,
+            residual,
+            unshot_fraction: 0.0,
+        });
+        if !converged {
+            s.stall.observe(residual, iterations)?;
+        }
+        Ok(s.info)
+    }
+
+    /// Sweeps until converged, the time limit or [`ClusterParams::max_sweeps`], showing each
+    /// sweep to `watch` and `progress`. A stall ends it unconverged (with a warning and
+    /// `report.stalled`); a stop from `watch` is [`BakeError::Stopped`].
+    pub fn run_to_end(
+        &mut self,
+        progress: &(dyn Fn(Phase, usize, usize) + Sync),
+        watch: &mut Watch<'_>,
+    ) -> Result<(), BakeError> {
+        let max = u64::from(self.cp.max_sweeps);
+        while self.has_emitters && self.sweeps.info.iterations < max {
+            let info = match self.step() {
+                Ok(info) => info,
+                Err(e @ SolveError::Stalled { .. }) => {
+                    self.warnings.push(e.to_string());
+                    self.sweeps.stalled = Some(e);
+                    break;
+                }
+                Err(e) => return Err(e.into()),
+            };
+            progress(Phase::Solve, info.iterations as usize, max as usize);
+            if let Some(f) = watch.on_sweep.as_mut() {
+                f(&self.sweep_view());
+            }
+            if watch.stopped() {
+                return Err(BakeError::Stopped);
+            }
+            let out_of_time = (self.params.time_limit).is_some_and(|l| self.sweeps.solving >= l);
+            if info.converged || out_of_time {
+                break;
+            }
+        }
+        tracing::info!(
+            iterations = self.sweeps.info.iterations,
+            residual = self.sweeps.info.residual,
+            converged = self.sweeps.info.converged,
+            "clustered bake: solved"
+        );
+        Ok(())
+    }
+
+    /// The bake as [`Watch::on_sweep`] sees it.
+    pub fn sweep_view(&self) -> Sweep<'_> {
+        Sweep {
+            mesh: &self.mesh,
+            radiosity: &self.b,
+            reflectance: &self.sys.rho,
+            enclosed: self.sys.enclosed(),
+            info: self.sweeps.info,
+            links: self.sys.links(),
+            seconds: self.started.elapsed().as_secs_f64(),
+        }
+    }
+
+    /// The element hierarchy.
+    pub fn mesh(&self) -> &Mesh {
+        &self.mesh
+    }
+
+    /// The scene's surfaces as the bake has them.
+    pub fn surfaces(&self) -> &[Surface] {
+        &self.surfaces
+    }
+
+    /// The current radiosity per element.
+    pub fn radiosity(&self) -> Vec<Rgb> {
+        if self.has_emitters {
+            self.b.clone()
+        } else {
+            vec![[0.0; 3]; self.b.len()]
+        }
+    }
+
+    /// The latest sweep's info.
+    pub fn last_info(&self) -> Info {
+        self.sweeps.info
+    }
+
+    /// Whether this bake came from a checkpoint.
+    pub fn is_resumed(&self) -> bool {
+        self.resumed
+    }
+
+    /// Links.
+    pub fn links(&self) -> usize {
+        self.sys.links()
+    }
+
+    /// Changes the surfaces' reflectance and emission and continues from the current
+    /// solution: the links are kept (they do not depend on colour; refinement used the old
+    /// estimates, as the per-triangle bake's edits do). Returns [`BakeError::NeedsRebuild`]
+    /// when the edit turns a bake with no emitters into one with some: it has no links.
+    pub fn edit_surfaces(&mut self, surfaces: &[Surface]) -> Result<(), BakeError> {
+        if surfaces.len() != self.surfaces.len() {
+            return Err(BakeError::InvalidParameter(format!(
+                "an edit must keep the {} surfaces ({} given)",
+                self.surfaces.len(),
+                surfaces.len()
+            )));
+        }
+        input::validate_surfaces(surfaces)?;
+        let (rho, source) = self.lighting.terms(surfaces, &self.mesh);
+        let has_emitters = source.iter().flatten().any(|&v| v > 0.0);
+        if has_emitters && !self.has_emitters {
+            return Err(BakeError::NeedsRebuild);
+        }
+        self.sys.rho = rho;
+        self.sys.source = source;
+        self.surfaces = surfaces.to_vec();
+        self.has_emitters = has_emitters;
+        let s = &mut self.sweeps;
+        (s.stall, s.last_update, s.since_start, s.stalled) = (Stall::default(), f64::NAN, 0, None);
+        s.info.converged = !has_emitters;
+        Ok(())
+    }
+
+    /// Replaces the punctual lights and the sky (`None`: no sky): their direct light is traced
+    /// again, the links are kept, and the sweeps continue as after [`Self::edit_surfaces`].
+    pub fn edit_lights_and_sky(
+        &mut self,
+        lights: &[Light],
+        sky: Option<&Sky>,
+    ) -> Result<(), BakeError> {
+        input::validate_lights(lights)?;
+        let relit = (self.lighting).relit(lights, sky, &self.mesh, &self.params.ff);
+        let old = std::mem::replace(&mut self.lighting, relit);
+        let surfaces = self.surfaces.clone();
+        let result = self.edit_surfaces(&surfaces);
+        if result.is_err() {
+            self.lighting = old;
+        }
+        result
+    }
+
+    /// Writes the links and the current solution to `path` (version 3), atomically.
+    pub fn write_checkpoint(&self, path: &Path) -> Result<(), BakeError> {
+        crate::checkpoint::write_clustered(
+            path,
+            self.fingerprint,
+            self.refinement_used,
+            self.sys.rows(),
+            self.sys.enclosed(),
+            &self.radiosity(),
+        )
+    }
+
+    /// The report as things stand.
+    pub fn report(&self) -> BakeReport {
+        let n = self.mesh.element_count();
+        let info = self.sweeps.info;
+        let (cluster_receiver_links, cluster_source_links) = self.sys.cluster_links();
+        let mut times = self.times;
+        times.solve = self.sweeps.solving.as_secs_f64();
+        BakeReport {
+            patches: n,
+            elements: n,
+            links: self.sys.links(),
+            link_bytes: self.sys.link_bytes(),
+            solver: SolverKind::Jacobi,
+            form_factors: self.params.form_factors,
+            times,
+            iterations: info.iterations,
+            converged: info.converged,
+            residual: info.residual,
+            unshot_fraction: 0.0,
+            timeline: self.sweeps.timeline.clone(),
+            warnings: self.warnings.clone(),
+            stalled: self.sweeps.stalled,
+            has_emitters: self.has_emitters,
+            clusters: Some(ClusterReport {
+                clusters: self.tree.clusters.len(),
+                cluster_receiver_links,
+                cluster_source_links,
+                refinement_asked: self.params.links.refinement,
+                refinement_used: self.refinement_used,
+                memory_limit: self.budget.limit,
+                memory_estimate: self.budget.used,
+                enclosed: self.sys.enclosed().iter().filter(|&&d| d).count(),
+            }),
+        }
+    }
+
+    /// Ends the bake and hands over the results (without the links: a checkpoint is written
+    /// from the bake, [`Self::write_checkpoint`]).
+    pub fn finish(self) -> BakeResult {
+        let report = self.report();
+        let b = self.radiosity();
+        let n = b.len();
+        let surfaces = surface_means(&self.surfaces, &self.mesh, &b);
+        let (rho, source, dead) = self.sys.into_parts();
+        let links = crate::links::Links {
+            row: vec![0; n + 1],
+            ..Default::default()
+        };
+        let system = System::new(&self.mesh, rho, source, links, &dead);
+        BakeResult::from_parts(self.mesh, system, b, surfaces, report, dead)
+    }
+}
+
+/// Refines the links within the budget, coarsening if allowed; returns them with the
+/// threshold used.
+fn refine_within_budget(
+    (mesh, tree, bvh, rho, source): (&Mesh, &Tree, &Bvh, &[Rgb], &[Rgb]),
+    params: &BakeParams,
+    cp: &ClusterParams,
+    budget: &mut Budget,
+    warnings: &mut Vec<String>,
+    progress: &(dyn Fn(Phase, usize, usize) + Sync),
+    stop: Option<&AtomicBool>,
+) -> Result<(Vec<Vec<refine::Link>>, f64), BakeError> {
+    let max3 = |v: &Rgb| v[0].max(v[1]).max(v[2]);
+    let bmesh = crate::hierarchy::Estimates::new(mesh, rho, source, 1.0).bhat;
+    let m = mesh.nodes.len();
+    let total = tree.len();
+    // Clusters: area-weighted means (B̂ A is the cluster's power); mesh nodes keep their max.
+    let mut bhat = bmesh;
+    bhat.resize(total, 0.0);
+    let mut rmax: Vec<f64> = vec![0.0; total];
+    for (i, &id) in mesh.leaves.iter().enumerate() {
+        rmax[id as usize] = max3(&rho[i]);
+    }
+    for nd in (0..m).rev() {
+        let node = &mesh.nodes[nd];
+        if !node.is_leaf() {
+            rmax[nd] = (0..4)
+                .map(|k| rmax[(node.first_child + k) as usize])
+                .fold(0.0, f64::max);
+        }
+    }
+    for c in (0..tree.clusters.len()).rev() {
+        let cl = &tree.clusters[c];
+        let [a, b] = cl.children.map(|x| x as usize);
+        let id = m + c;
+        let (wa, wb) = (tree.area[a], tree.area[b]);
+        bhat[id] = if wa + wb > 0.0 {
+            (wa * bhat[a] + wb * bhat[b]) / (wa + wb)
+        } else {
+            0.0
+        };
+        rmax[id] = rmax[a].max(rmax[b]);
+    }
+    let asked = params.links.refinement;
+    let mut eps = asked;
+    for attempt in 0..=COARSEN_STEPS {
+        let max_links = budget.left() / LINK_BYTES;
+        let r = refine::Refiner {
+            mesh,
+            tree,
+            vis: bvh,
+            bhat: &bhat,
+            rho: &rmax,
+            eps,
+            kind: params.form_factors,
+            samples: cp.samples,
+            seed: params.ff.seed,
+            max_links,
+            stop,
+        };
+        let t = Instant::now();
+        if let Some(parts) = r.build(&|d, n| progress(Phase::Links, d, n)) {
+            let count: u64 = parts.iter().map(|p| p.len() as u64).sum();
+            budget.reserve("the links", count * LINK_BYTES)?;
+            if attempt > 0 {
+                warnings.push(format!(
+                    "the memory limit of {} MiB made the bake coarser: refinement {eps} instead of {asked}",
+                    budget.limit >> 20
+                ));
+            }
+            return Ok((parts, eps));
+        }
+        if stop.is_some_and(|f| f.load(Ordering::Relaxed)) {
+            return Err(BakeError::Stopped);
+        }
+        tracing::warn!(
+            refinement = eps,
+            seconds = t.elapsed().as_secs_f64(),
+            max_links,
+            "links exceed the memory limit"
+        );
+        if !cp.coarsen {
+            break;
+        }
+        eps *= 4.0;
+    }
+    Err(BakeError::OutOfMemory {
+        what: "the links",
+        needed: budget.used + budget.left() + 1,
+        limit: budget.limit,
+    })
+}

@@ -1,0 +1,201 @@
+//! The clustered bake as an engine (`cluster::ClusterBake`): version-3 checkpoints (resume
+//! without refining, the other hierarchy's files refused with a typed "rebake" error, damaged
+//! or foreign files refused), and material and light edits that keep the links.
+
+use radiant_radiosity::cluster::{ClusterBake, ClusterParams, Watch};
+use radiant_radiosity::{Bake, BakeError, BakeParams, BakeResult};
+use radiant_scene::Scene;
+
+fn params() -> BakeParams {
+    let mut p = BakeParams::default();
+    p.links.refinement = 0.01;
+    p
+}
+
+fn fresh(scene: &Scene, p: &BakeParams) -> ClusterBake {
+    ClusterBake::new(scene, p, &ClusterParams::default(), &|_, _, _| {}, None).expect("builds")
+}
+
+fn run(mut b: ClusterBake) -> BakeResult {
+    b.run_to_end(&|_, _, _| {}, &mut Watch::default())
+        .expect("solves");
+    b.finish()
+}
+
+/// Largest relative difference of the surface means (emitters aside).
+fn worst(a: &BakeResult, b: &BakeResult) -> f64 {
+    let mut w = 0.0f64;
+    for (x, y) in a.surfaces.iter().zip(&b.surfaces) {
+        assert_eq!(x.name, y.name);
+        for c in 0..3 {
+            if !x.emitter && x.mean[c] > 0.0 {
+                w = w.max((x.mean[c] - y.mean[c]).abs() / x.mean[c]);
+            }
+        }
+    }
+    w
+}
+
+fn temp(name: &str) -> std::path::PathBuf {
+    std::env::temp_dir().join(format!("radiant-{name}-{}.ckpt", std::process::id()))
+}
+
+#[test]
+fn a_resumed_clustered_bake_refines_nothing_and_ends_where_a_fresh_one_does() {
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    let p = params();
+    let path = temp("v3");
+    // Written right after the links, before any sweep: what a crash mid-solve leaves.
+    let b = fresh(&scene, &p);
+    b.write_checkpoint(&path).expect("writes");
+    let links = b.links();
+    let a = run(b);
+    assert!(a.report.converged);
+
+    let r = ClusterBake::resume(&scene, &p, &ClusterParams::default(), &path).expect("resumes");
+    assert!(r.is_resumed());
+    assert_eq!(r.links(), links);
+    let resumed = run(r);
+    assert!(resumed.report.converged);
+    assert_eq!(resumed.report.links, a.report.links);
+    // The same links and the same start: the same sweeps.
+    assert_eq!(resumed.radiosity, a.radiosity);
+
+    // Written converged, it resumes converged: two sweeps confirm it.
+    let mut b = fresh(&scene, &p);
+    b.run_to_end(&|_, _, _| {}, &mut Watch::default())
+        .expect("solves");
+    b.write_checkpoint(&path).expect("writes");
+    let r = ClusterBake::resume(&scene, &p, &ClusterParams::default(), &path).expect("resumes");
+    let again = run(r);
+    assert!(
+        again.report.iterations <= 3,
+        "{} sweeps",
+        again.report.iterations
+    );
+    assert!(worst(&a, &again) < 1e-3, "{}", worst(&a, &again));
+    let _ = std::fs::remove_file(&path);
+}
+
+#[test]
+fn checkpoints_of_the_other_hierarchy_other_geometry_or_damaged_are_typed_errors() {
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    let mut p = params();
+    p.mesh.patch_size = 0.25;
+    let cp = ClusterParams::default();
+    let (v2, v3) = (temp("other-v2"), temp("other-v3"));
+    // A per-triangle checkpoint (version 2) for a clustered bake, and the reverse.
+    let tri = Bake::new(&scene, &p).expect("bake");
+    tri.write_checkpoint(&v2).expect("writes v2");
+    fresh(&scene, &p).write_checkpoint(&v3).expect("writes v3");
+    match ClusterBake::resume(&scene, &p, &cp, &v2) {
+        Err(BakeError::CheckpointHierarchy {
+            version: 2,
+            found: "per-triangle",
+            needed: "clustered",
+            ..
+        }) => {}
+        Err(e) => panic!("expected a typed rebake error, got {e}"),
+        Ok(_) => panic!("a per-triangle checkpoint resumed a clustered bake"),
+    }
+    match Bake::resume(&scene, &p, &v3) {
+        Err(e @ BakeError::CheckpointHierarchy { version: 3, .. }) => {
+            assert!(e.to_string().contains("rebake"), "{e}");
+        }
+        Err(e) => panic!("expected a typed rebake error, got {e}"),
+        Ok(_) => panic!("a clustered checkpoint resumed a per-triangle bake"),
+    }
+    // Other geometry: the fingerprint says so.
+    let mut moved = scene.clone();
+    moved.triangles[0].vertices[0].x += 0.01;
+    assert!(matches!(
+        ClusterBake::resume(&moved, &p, &cp, &v3),
+        Err(BakeError::Checkpoint(_))
+    ));
+    // Other visibility samples per link: other links.
+    let more = ClusterParams { samples: 8, ..cp };
+    assert!(matches!(
+        ClusterBake::resume(&scene, &p, &more, &v3),
+        Err(BakeError::Checkpoint(_))
+    ));
+    // Damaged: every byte flipped in turn (a stride through the file) is refused, never a
+    // panic or a huge allocation.
+    let good = std::fs::read(&v3).expect("reads");
+    for at in (0..good.len()).step_by(good.len() / 97 + 1) {
+        let mut bad = good.clone();
+        bad[at] ^= 0x5A;
+        std::fs::write(&v3, &bad).expect("writes");
+        assert!(
+            ClusterBake::resume(&scene, &p, &cp, &v3).is_err(),
+            "byte {at} flipped was accepted"
+        );
+    }
+    std::fs::write(&v3, &good[..good.len() / 2]).expect("writes");
+    assert!(matches!(
+        ClusterBake::resume(&scene, &p, &cp, &v3),
+        Err(BakeError::Checkpoint(_))
+    ));
+    let _ = std::fs::remove_file(&v2);
+    let _ = std::fs::remove_file(&v3);
+}
+
+#[test]
+fn material_and_light_edits_keep_the_links_and_match_a_fresh_bake() {
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    let p = params();
+    let mut b = fresh(&scene, &p);
+    b.run_to_end(&|_, _, _| {}, &mut Watch::default())
+        .expect("solves");
+    let links = b.links();
+
+    // The red wall turned blue: the same links, the light a fresh bake of the edited scene
+    // gets (whose links were refined with the new estimates: a few differ).
+    let mut edited = scene.clone();
+    let red = (edited.surfaces.iter())
+        .position(|s| s.name == "left_wall")
+        .expect("the red wall");
+    edited.surfaces[red].reflectance = [0.1, 0.2, 0.6];
+    b.edit_surfaces(&edited.surfaces).expect("edits");
+    assert_eq!(b.links(), links);
+    let after = run(b);
+    assert!(after.report.converged);
+    let truth = run(fresh(&edited, &p));
+    let w = worst(&truth, &after);
+    eprintln!("material edit vs a fresh bake: max {:.3} %", w * 100.0);
+    assert!(w < 0.02, "max {:.3} %", w * 100.0);
+
+    // A bad material is refused and changes nothing.
+    let mut b = fresh(&scene, &p);
+    b.run_to_end(&|_, _, _| {}, &mut Watch::default())
+        .expect("solves");
+    let unlit = b.radiosity();
+    let mut bad = scene.surfaces.clone();
+    bad[red].reflectance = [1.5, 0.0, 0.0];
+    assert!(matches!(
+        b.edit_surfaces(&bad),
+        Err(BakeError::InvalidMaterial { .. })
+    ));
+
+    // A sun added over the box's open side: its direct light is traced, the links kept.
+    let mut lit = scene.clone();
+    lit.lights.push(radiant_scene::Light {
+        name: "sun".into(),
+        kind: radiant_scene::LightKind::Directional,
+        position: glam::DVec3::ZERO,
+        direction: glam::DVec3::new(0.2, -0.3, 1.0).normalize(),
+        intensity: 2.0,
+        color: [1.0, 0.9, 0.8],
+        range: None,
+    });
+    b.edit_lights_and_sky(&lit.lights, None).expect("edits");
+    assert_eq!(b.links(), links);
+    let after = run(b);
+    let truth = run(fresh(&lit, &p));
+    let gain = (after.radiosity.iter().zip(&unlit))
+        .map(|(x, y)| x[0] - y[0])
+        .fold(0.0f64, f64::max);
+    assert!(gain > 0.05, "the sun reached nothing (largest gain {gain})");
+    let w = worst(&truth, &after);
+    eprintln!("light edit vs a fresh bake: max {:.3} %", w * 100.0);
+    assert!(w < 0.02, "max {:.3} %", w * 100.0);
+}
