@@ -160,20 +160,8 @@ impl Cursor<'_> {
 /// anything is allocated, so a corrupt file is an error, not a crash.
 pub fn read(path: &Path) -> Result<Saved, BakeError> {
     let bad = |what: &str| BakeError::Checkpoint(format!("{}: {what}", path.display()));
-    let data = std::fs::read(path).map_err(|e| bad(&e.to_string()))?;
-    if data.len() >= 16 && &data[..15] == MAGIC && data[15] == VERSION_CLUSTERED {
-        return Err(other_hierarchy(path, VERSION_CLUSTERED));
-    }
-    if data.len() < 16 + 32 + 8 || &data[..15] != MAGIC || !matches!(data[15], 1 | 2) {
-        return Err(bad("not a Radiant bake checkpoint (or another version)"));
-    }
-    let version = data[15];
-    let (body, sum) = data.split_at(data.len() - 8);
-    let mut h = Fnv::new();
-    h.bytes(body);
-    if sum != h.0.to_le_bytes() {
-        return Err(bad("checksum mismatch: the file is damaged"));
-    }
+    let (data, version) = open(path, false, 32)?;
+    let body = &data[..data.len() - 8];
     let mut c = Cursor { data: body, at: 16 };
     let header = if version == 1 { 32 } else { 48 };
     if body.len() < 16 + header {
@@ -261,6 +249,29 @@ pub fn read(path: &Path) -> Result<Saved, BakeError> {
     })
 }
 
+/// Reads a checkpoint of one hierarchy (`clustered`: version 3, else 1 or 2) with at least
+/// `header` bytes after the magic, and checks its checksum; returns the bytes and the version.
+/// The other hierarchy's file is [`BakeError::CheckpointHierarchy`].
+fn open(path: &Path, clustered: bool, header: usize) -> Result<(Vec<u8>, u8), BakeError> {
+    let bad = |what: &str| BakeError::Checkpoint(format!("{}: {what}", path.display()));
+    let data = std::fs::read(path).map_err(|e| bad(&e.to_string()))?;
+    let version = (data.len() >= 16 && &data[..15] == MAGIC).then(|| data[15]);
+    let ours = |v: u8| (v == VERSION_CLUSTERED) == clustered;
+    match version {
+        Some(v @ (1 | 2 | VERSION_CLUSTERED)) if !ours(v) => return Err(other_hierarchy(path, v)),
+        Some(1 | 2 | VERSION_CLUSTERED) if data.len() >= 16 + header + 8 => {}
+        _ => return Err(bad("not a Radiant bake checkpoint (or another version)")),
+    }
+    let (body, sum) = data.split_at(data.len() - 8);
+    let mut h = Fnv::new();
+    h.bytes(body);
+    if sum != h.0.to_le_bytes() {
+        return Err(bad("checksum mismatch: the file is damaged"));
+    }
+    let v = data[15];
+    Ok((data, v))
+}
+
 fn other_hierarchy(path: &Path, version: u8) -> BakeError {
     let (found, needed) = if version == VERSION_CLUSTERED {
         ("clustered", "per-triangle")
@@ -343,19 +354,8 @@ pub fn write_clustered(
 /// values); a per-triangle one is [`BakeError::CheckpointHierarchy`].
 pub fn read_clustered(path: &Path) -> Result<SavedClustered, BakeError> {
     let bad = |what: &str| BakeError::Checkpoint(format!("{}: {what}", path.display()));
-    let data = std::fs::read(path).map_err(|e| bad(&e.to_string()))?;
-    if data.len() >= 16 && &data[..15] == MAGIC && matches!(data[15], 1 | 2) {
-        return Err(other_hierarchy(path, data[15]));
-    }
-    if data.len() < 16 + 40 + 8 || &data[..15] != MAGIC || data[15] != VERSION_CLUSTERED {
-        return Err(bad("not a Radiant bake checkpoint (or another version)"));
-    }
-    let (body, sum) = data.split_at(data.len() - 8);
-    let mut h = Fnv::new();
-    h.bytes(body);
-    if sum != h.0.to_le_bytes() {
-        return Err(bad("checksum mismatch: the file is damaged"));
-    }
+    let (data, _) = open(path, true, 40)?;
+    let body = &data[..data.len() - 8];
     let mut c = Cursor { data: body, at: 16 };
     let fingerprint = c.u64();
     let (n, nodes, nl) = (c.u64(), c.u64(), c.u64());

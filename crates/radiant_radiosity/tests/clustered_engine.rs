@@ -118,6 +118,17 @@ fn checkpoints_of_the_other_hierarchy_other_geometry_or_damaged_are_typed_errors
         ClusterBake::resume(&scene, &p, &more, &v3),
         Err(BakeError::Checkpoint(_))
     ));
+    // Written when nothing emitted (materials are not in the fingerprint): no links to
+    // resume from, refused rather than solved with none.
+    let mut dark = scene.clone();
+    dark.surfaces.iter_mut().for_each(|s| s.emission = [0.0; 3]);
+    let v3_dark = temp("dark-v3");
+    fresh(&dark, &p).write_checkpoint(&v3_dark).expect("writes");
+    assert!(matches!(
+        ClusterBake::resume(&scene, &p, &cp, &v3_dark),
+        Err(BakeError::Checkpoint(_))
+    ));
+    let _ = std::fs::remove_file(&v3_dark);
     // Damaged: every byte flipped in turn (a stride through the file) is refused, never a
     // panic or a huge allocation.
     let good = std::fs::read(&v3).expect("reads");

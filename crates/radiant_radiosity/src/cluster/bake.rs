@@ -187,6 +187,12 @@ impl ClusterBake {
                         "its element hierarchy differs from this scene's".into(),
                     ));
                 }
+                if has_emitters && sv.rows.src.is_empty() && n > 0 {
+                    // Written when nothing emitted, so it has no links to resume from.
+                    return Err(BakeError::Checkpoint(
+                        "it was written when nothing emitted and holds no links".into(),
+                    ));
+                }
                 budget.reserve("the links", sv.rows.src.len() as u64 * LINK_BYTES)?;
                 let sys = HierSystem::from_rows(&mesh, &tree, sv.rows, rho, source, sv.dead);
                 (sys, sv.refinement, Some(sv.radiosity))
