@@ -98,10 +98,10 @@ fn main() -> anyhow::Result<()> {
     let s = app.world.resource::<BakeStatus>().clone();
     println!(
         "{} elements, {} links; first bake converged in {:.2} s ({} sweeps)",
-        s.elements,
-        s.links,
+        s.size.elements,
+        s.size.links,
         t0.elapsed().as_secs_f64(),
-        s.iterations
+        s.progress.iterations
     );
     report("first bake", &snaps, &mut frames);
 
@@ -116,7 +116,10 @@ fn main() -> anyhow::Result<()> {
     let (snaps, mut frames) = run(&mut app, t0);
     println!(
         "\nleft wall turned blue: {} sweeps after the edit",
-        app.world.resource::<BakeStatus>().iterations_since_edit
+        app.world
+            .resource::<BakeStatus>()
+            .progress
+            .iterations_since_edit
     );
     report("material edit", &snaps, &mut frames);
 
@@ -132,12 +135,12 @@ fn main() -> anyhow::Result<()> {
     let s = app.world.resource::<BakeStatus>();
     println!(
         "\nshort block moved 5 cm: {} of {} links recomputed, {} builds in all",
-        s.links_recomputed, s.links, s.builds
+        s.counts.links_recomputed, s.size.links, s.counts.builds
     );
     report("move", &snaps, &mut frames);
 
     // Remove the block: its links go, the links its bounds do not reach are kept.
-    let recomputed_before = app.world.resource::<BakeStatus>().links_recomputed;
+    let recomputed_before = app.world.resource::<BakeStatus>().counts.links_recomputed;
     let block: Vec<Entity> = app
         .world
         .query::<(Entity, &Name)>()
@@ -154,9 +157,9 @@ fn main() -> anyhow::Result<()> {
     println!(
         "
 short block removed: {} of {} links recomputed, {} builds in all",
-        s.links_recomputed - recomputed_before,
-        s.links,
-        s.builds
+        s.counts.links_recomputed - recomputed_before,
+        s.size.links,
+        s.counts.builds
     );
     report("removal", &snaps, &mut frames);
     Ok(())

@@ -436,30 +436,28 @@ pub fn radiosity_panel(ui: &mut Ui, world: &mut World, _state: &mut InspectorSta
             ""
         }
     ));
-    let eta = status
-        .eta_s
-        .map_or_else(String::new, |s| format!(", ETA {s:.1} s"));
+    let eta = (status.estimate.eta_s).map_or_else(String::new, |s| format!(", ETA {s:.1} s"));
     ui.add(
-        egui::ProgressBar::new(status.progress.clamp(0.0, 1.0) as f32)
-            .text(format!("{:.0} %{eta}", status.progress * 100.0)),
+        egui::ProgressBar::new(status.progress.fraction.clamp(0.0, 1.0) as f32)
+            .text(format!("{:.0} %{eta}", status.progress.fraction * 100.0)),
     );
     ui.label(format!(
         "{} elements, {} links, {} iterations, est. error {:.2e}{}",
-        status.elements,
-        status.links,
-        status.iterations,
-        status.estimated_error,
-        if status.resumed {
+        status.size.elements,
+        status.size.links,
+        status.progress.iterations,
+        status.estimate.error,
+        if status.size.resumed {
             ", resumed from checkpoint"
         } else {
             ""
         }
     ));
     if let Some(e) = &status.error {
-        ui.colored_label(Color32::from_rgb(230, 60, 50), e);
+        ui.colored_label(Color32::from_rgb(230, 60, 50), e.to_string());
     }
     if let Some(w) = &status.warning {
-        warn(ui, w);
+        warn(ui, w.to_string());
     }
     let points: Vec<[f64; 2]> = status
         .history
@@ -539,6 +537,6 @@ pub fn performance_panel(ui: &mut Ui, world: &mut World, state: &mut InspectorSt
         ));
     }
     if let Some(e) = &render.error {
-        ui.colored_label(Color32::from_rgb(230, 60, 50), e);
+        ui.colored_label(Color32::from_rgb(230, 60, 50), e.to_string());
     }
 }

@@ -298,12 +298,12 @@ fn radiosity_panel_controls_the_bake() {
     {
         let mut s = h.state_mut().world.resource_mut::<BakeStatus>();
         s.phase = BakePhase::Solving;
-        s.progress = 0.42;
-        s.eta_s = Some(1.5);
-        s.elements = 15488;
-        s.links = 6_100_000;
-        s.iterations = 12;
-        s.estimated_error = 3.2e-3;
+        s.progress.fraction = 0.42;
+        s.estimate.eta_s = Some(1.5);
+        s.size.elements = 15488;
+        s.size.links = 6_100_000;
+        s.progress.iterations = 12;
+        s.estimate.error = 3.2e-3;
         s.stale = true;
         s.history = (0..40)
             .map(|i| (f64::from(i) * 0.05, 0.5 * 0.8f64.powi(i)))

@@ -381,6 +381,17 @@ impl Bake {
         }
     }
 
+    /// Whether the solve has spent its time limit (`BakeParams::time_limit`).
+    pub fn out_of_time(&self) -> bool {
+        (self.params.time_limit).is_some_and(|l| self.solve.solving() >= l)
+    }
+
+    /// The current light as a smooth field (for light maps).
+    pub fn smooth_field(&self) -> crate::smooth::SmoothField {
+        let radiosity = self.radiosity();
+        crate::smooth::SmoothField::new(&self.mesh, &self.system, &self.surfaces, &radiosity)
+    }
+
     /// Steps until converged or the time limit, calling `on_event` after each step.
     ///
     /// A solve that stops making progress ([`SolveError::Stalled`]: reflectance 1 in a closed
@@ -394,9 +405,7 @@ impl Bake {
             match self.step(self.params.step_budget) {
                 Ok(info) => {
                     on_event(BakeEvent::Solve(&info, self.elapsed()));
-                    let out_of_time =
-                        (self.params.time_limit).is_some_and(|l| self.solve.solving() >= l);
-                    if info.converged || out_of_time {
+                    if info.converged || self.out_of_time() {
                         break;
                     }
                 }

@@ -48,7 +48,7 @@ pub use links::LinkParams;
 pub use mesh::{Mesh, MeshParams};
 pub use params::BakeParams;
 pub use report::{BakeReport, BakeResult, PhaseTimes, TimelinePoint};
-pub use solve::{Info, Solve, SolveError, Stall};
+pub use solve::{Info, Solve, SolveError, Stall, eta_seconds};
 pub use solvers::{Solver, SolverKind, SolverParams};
 pub use system::{Rgb, System};
 

@@ -73,6 +73,24 @@ pub fn progress(estimated_error: f64, tolerance: f64, converged: bool) -> f64 {
     }
 }
 
+/// Seconds until the estimated error reaches `tolerance` at the rate of the last eight steps
+/// of `history` (`(seconds, estimated error)` after each step; convergence is log-linear), or
+/// `None` while the rate cannot be told (fewer than three steps, or no progress).
+pub fn eta_seconds(history: &[(f64, f64)], tolerance: f64) -> Option<f64> {
+    let n = history.len();
+    if n < 3 {
+        return None;
+    }
+    let (t0, e0) = history[n.saturating_sub(8)];
+    let (t1, e1) = history[n - 1];
+    if e1 <= tolerance {
+        return Some(0.0);
+    }
+    let rate = (e0.ln() - e1.ln()) / (t1 - t0).max(1e-9);
+    let eta = (e1.ln() - tolerance.ln()) / rate;
+    (rate > 0.0 && eta.is_finite()).then_some(eta)
+}
+
 /// Why a solve cannot go on.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
 pub enum SolveError {
@@ -274,5 +292,17 @@ mod tests {
         assert_eq!(progress(0.5, 1e-4, true), 1.0);
         let i = Info::from_residual(3, 1e-3, 0.0, 0.9, 1e-4, false);
         assert!((i.estimated_error - 1e-2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_eta_follows_the_log_linear_rate() {
+        // The error falls tenfold a second: from 1e-2 at t = 4 s, 1e-4 is 2 s away.
+        let h: Vec<(f64, f64)> = (0..5).map(|k| (f64::from(k), 10f64.powi(2 - k))).collect();
+        let eta = eta_seconds(&h, 1e-4).expect("a rate");
+        assert!((eta - 2.0).abs() < 1e-9, "{eta}");
+        assert_eq!(eta_seconds(&h[..2], 1e-4), None);
+        assert_eq!(eta_seconds(&h, 1.0), Some(0.0));
+        let flat = [(0.0, 0.5), (1.0, 0.5), (2.0, 0.5)];
+        assert_eq!(eta_seconds(&flat, 1e-4), None);
     }
 }

@@ -616,7 +616,7 @@ impl Running {
             self.window.set_title(&format!(
                 "Radiant: {:?} {:.0} %{}",
                 s.phase,
-                s.progress * 100.0,
+                s.progress.fraction * 100.0,
                 if s.stale { " (stale)" } else { "" }
             ));
         }

@@ -20,6 +20,7 @@ use crate::metrics::surface_means;
 use crate::params::BakeParams;
 use crate::report::{BakeReport, BakeResult, PhaseTimes, TimelinePoint};
 use crate::rng::Fnv;
+use crate::smooth::{SmoothField, element_emission};
 use crate::solve::{Info, SolveError, Stall};
 use crate::solvers::SolverKind;
 use crate::system::{Rgb, System};
@@ -310,7 +311,7 @@ impl ClusterBake {
         watch: &mut Watch<'_>,
     ) -> Result<(), BakeError> {
         let max = u64::from(self.cp.max_sweeps);
-        while self.has_emitters && self.sweeps.info.iterations < max {
+        while self.has_emitters && !self.out_of_sweeps() {
             let info = match self.step() {
                 Ok(info) => info,
                 Err(e @ SolveError::Stalled { .. }) => {
@@ -327,8 +328,7 @@ impl ClusterBake {
             if watch.stopped() {
                 return Err(BakeError::Stopped);
             }
-            let out_of_time = (self.params.time_limit).is_some_and(|l| self.sweeps.solving >= l);
-            if info.converged || out_of_time {
+            if info.converged || self.out_of_sweeps() {
                 break;
             }
         }
@@ -339,6 +339,29 @@ impl ClusterBake {
             "clustered bake: solved"
         );
         Ok(())
+    }
+
+    /// Whether the sweeps have run out: [`ClusterParams::max_sweeps`] done, or the solve's time
+    /// limit (`BakeParams::time_limit`) spent.
+    pub fn out_of_sweeps(&self) -> bool {
+        let s = &self.sweeps;
+        s.info.iterations >= u64::from(self.cp.max_sweeps)
+            || (self.params.time_limit).is_some_and(|l| s.solving >= l)
+    }
+
+    /// The current light as a smooth field (for light maps): enclosed elements do not vote.
+    pub fn smooth_field(&self) -> SmoothField {
+        let emission = element_emission(&self.mesh, &self.surfaces);
+        let weight: Vec<f64> = (self.sys.enclosed().iter())
+            .map(|&d| f64::from(u8::from(!d)))
+            .collect();
+        SmoothField::from_parts(
+            &self.mesh,
+            &self.sys.rho,
+            &emission,
+            Some(&weight),
+            &self.radiosity(),
+        )
     }
 
     /// The bake as [`Watch::on_sweep`] sees it.
