@@ -4,15 +4,18 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use indicatif::{ProgressBar, ProgressStyle};
-use radiant::radiosity::metrics::{
-    self, CORNELL_BOX_REFERENCE, CORNELL_POINTS_RGB, CORNELL_POINTS_SPECTRAL,
-};
-use radiant::radiosity::{BakeEvent, lightmap};
+use radiant::radiosity::metrics::{self, ErrorStats, PointComparison, ShippedReferences};
+use radiant::radiosity::smooth::SmoothField;
+use radiant::radiosity::{BakeParams, BakeResult, SolverKind, lightmap};
+use radiant::scene::Scene;
+use radiant::scene::atlas::Atlas;
 use serde_json::json;
 
+use crate::BakeArgs;
+use crate::args::Method;
+use crate::baking::{bake_clustered, bake_triangles, use_clustered};
+use crate::common::{NamedReference, load_scene, reference_for};
 use crate::output::{self, ensure_dir, write_atomic};
-use crate::{BakeArgs, SceneArgs, load_scene, parse_ff, parse_solver};
 
 /// A point comparison as JSON: mean, max and each point.
 fn points_json(c: &metrics::PointComparison) -> serde_json::Value {
@@ -24,52 +27,17 @@ fn points_json(c: &metrics::PointComparison) -> serde_json::Value {
     json!({ "mean_rel": c.mean_rel, "max_rel": c.max_rel, "reference_scale": c.scale, "points": points })
 }
 
-/// A per-surface reference and where it came from.
-pub type NamedReference = (String, Vec<(String, [f64; 3])>);
-
-/// The reference for a bake: a given CSV, or the shipped one for the builtin Cornell box.
-pub fn reference_for(
-    scene: &SceneArgs,
-    given: Option<&Path>,
-) -> anyhow::Result<Option<NamedReference>> {
-    if let Some(path) = given {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read reference {}", path.display()))?;
-        let rows =
-            metrics::parse_reference_csv(&text).with_context(|| format!("{}", path.display()))?;
-        return Ok(Some((path.display().to_string(), rows)));
-    }
-    if scene
-        .builtin
-        .as_deref()
-        .is_some_and(|b| b.starts_with("cornell"))
-    {
-        let rows = metrics::parse_reference_csv(CORNELL_BOX_REFERENCE)?;
-        return Ok(Some((
-            "Mitsuba 3 path-traced irradiance meters (assets/reference)".into(),
-            rows,
-        )));
-    }
-    Ok(None)
-}
-
-/// Spectral materials: a side file, or the shipped measured spectra of the builtin Cornell box.
+/// Spectral materials: a side file, or the measured spectra shipped with a builtin scene.
 fn spectral_materials(
-    scene: &SceneArgs,
+    shipped: Option<ShippedReferences>,
     file: Option<&Path>,
 ) -> anyhow::Result<std::collections::HashMap<String, radiant::radiosity::spectral::SpectralMaterial>>
 {
-    let text = match file {
-        Some(p) => std::fs::read_to_string(p)
+    let text = match (file, shipped) {
+        (Some(p), _) => std::fs::read_to_string(p)
             .with_context(|| format!("cannot read spectra {}", p.display()))?,
-        None if scene
-            .builtin
-            .as_deref()
-            .is_some_and(|b| b.starts_with("cornell")) =>
-        {
-            include_str!("../assets/cornell_box_spectra.json").to_string()
-        }
-        None => anyhow::bail!("--spectral needs --spectra FILE for this scene"),
+        (None, Some(s)) => s.spectra.to_string(),
+        (None, None) => anyhow::bail!("--spectral needs --spectra FILE for this scene"),
     };
     let v: serde_json::Value =
         serde_json::from_str(&text).context("spectra file is not valid JSON")?;
@@ -112,32 +80,105 @@ fn spectral_materials(
     Ok(out)
 }
 
-/// A progress bar on a terminal; hidden otherwise.
-pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
-    let pb = ProgressBar::new(len);
-    if let Ok(style) =
-        ProgressStyle::with_template("{spinner} {msg:24} [{bar:32}] {pos}/{len} {elapsed_precise}")
-    {
-        pb.set_style(style.progress_chars("=> "));
-    }
-    pb.set_message(what.to_string());
-    pb
+/// What a bake works on: the scene, its parameters, the reference it is measured against and
+/// its light map's atlas.
+struct Job {
+    scene: Scene,
+    source: String,
+    params: BakeParams,
+    reference: Option<NamedReference>,
+    shipped: Option<ShippedReferences>,
+    atlas: Atlas,
+    start: Instant,
+    import_s: f64,
+    atlas_s: f64,
+}
+
+/// The per-surface error, named by its reference.
+type NamedError = (String, ErrorStats);
+
+/// Point comparisons against path tracing: of the elements, and of the light map's field.
+type Points = (PointComparison, PointComparison);
+
+/// What the light map's fill and the export took and wrote.
+struct Written {
+    map: lightmap::LightMap,
+    lightmap_s: f64,
+    write_s: f64,
+    export: serde_json::Value,
 }
 
 pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
-    if args.method == "gpu-hemicube" {
+    let solver = match args.method {
+        Method::Solver(s) => s,
         #[cfg(feature = "render")]
-        return crate::gather_cmd::bake(args);
+        Method::GpuHemicube => return crate::gather_cmd::bake(args),
         #[cfg(not(feature = "render"))]
-        anyhow::bail!(
+        Method::GpuHemicube => anyhow::bail!(
             "--method gpu-hemicube needs a build with the `render` feature (wgpu); use jacobi, gauss-seidel, southwell or direct"
-        );
-    }
+        ),
+    };
     args.solve.init_threads()?;
+    let job = prepare(args, solver)?;
+    let clustered = use_clustered(
+        args.hierarchy.hierarchy,
+        args.spectral,
+        &job.scene,
+        &job.params,
+    )?;
+    let mut result = if clustered {
+        bake_clustered(
+            &job.scene,
+            &job.params,
+            &args.hierarchy,
+            args.checkpoint.as_deref(),
+        )?
+    } else {
+        bake_triangles(&job.scene, &job.params, args.checkpoint.as_deref())?
+    };
+    let error = match &job.reference {
+        Some((name, rows)) => Some((
+            name.clone(),
+            metrics::compare_surfaces(&result.surfaces, rows)?,
+        )),
+        None => None,
+    };
+    let points = job.shipped.and_then(|s| rgb_points(&job.scene, &result, s));
+    let spectral = if args.spectral {
+        spectral(args, &job, &mut result)?
+    } else {
+        serde_json::Value::Null
+    };
+    let written = write_outputs(args, &job, &result)?;
+    let total_s = job.start.elapsed().as_secs_f64();
+    let mut report = report_json(args, &job, &result, &written, error.as_ref(), total_s);
+    if !spectral.is_null() {
+        report["spectral"] = spectral;
+    }
+    if let Some((c, smooth)) = &points {
+        report["points_vs_path_traced"] = points_json(c);
+        report["points_vs_path_traced"]["smooth"] = points_json(smooth);
+    }
+    write_atomic(
+        &args.out.join("report.json"),
+        serde_json::to_string_pretty(&report)?.as_bytes(),
+    )?;
+    print_summary(
+        args,
+        &job,
+        &result,
+        total_s,
+        points.as_ref(),
+        error.as_ref(),
+    );
+    Ok(())
+}
+
+/// Reads the scene and its reference, checks what can be checked before baking, and lays out
+/// the light map's atlas (a density it cannot use fails before the bake, not after).
+fn prepare(args: &BakeArgs, solver: SolverKind) -> anyhow::Result<Job> {
     let start = Instant::now();
-    let solver = parse_solver(&args.method)?;
-    let ff = parse_ff(&args.form_factors)?;
-    let params = args.solve.params(solver, ff)?;
+    let params = args.solve.params(solver, args.form_factors.0)?;
     let reference = reference_for(&args.scene, args.reference.as_deref())?;
     let (scene, source) = load_scene(&args.scene)?;
     let import_s = start.elapsed().as_secs_f64();
@@ -156,10 +197,8 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         anyhow::ensure!(known, "reference {name} names none of the scene's surfaces");
     }
     ensure_dir(&args.out)?;
-    // The light map's atlas first: a density it cannot use fails before the bake, not after.
     let lap = Instant::now();
-    let atlas =
-        radiant::scene::atlas::Atlas::paged(&scene, args.texel_density, args.lightmap_page)?;
+    let atlas = Atlas::paged(&scene, args.texel_density, args.lightmap_page)?;
     let atlas_s = lap.elapsed().as_secs_f64();
     println!(
         "light-map atlas: {} page(s) of {}×{} texels, {} charts, {:.1} texels/unit, {:.1} % inside charts ({:.2} s)",
@@ -171,165 +210,173 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         atlas.utilisation() * 100.0,
         atlas_s
     );
+    Ok(Job {
+        scene,
+        source,
+        params,
+        reference,
+        shipped: args.scene.shipped(),
+        atlas,
+        start,
+        import_s,
+        atlas_s,
+    })
+}
 
-    let clustered = use_clustered(&args.hierarchy, args.spectral, &scene, &params)?;
-    let result = if clustered {
-        bake_clustered(&scene, &params, &args.hierarchy, args.checkpoint.as_deref())?
-    } else {
-        bake_triangles(&scene, &params, args.checkpoint.as_deref())?
-    };
-
-    let error = match &reference {
-        Some((name, rows)) => Some((
-            name.clone(),
-            metrics::compare_surfaces(&result.surfaces, rows)?,
-        )),
-        None => None,
-    };
-    // The builtin Cornell box also has path-traced radiosity at 24 surface points (RGB and
-    // spectral Mitsuba 3 runs): pointwise errors, not just surface means.
-    let cornell = args.scene.builtin.as_deref() == Some("cornell-box");
-    // Informational: a failure is a warning, not a failed bake.
-    let rgb_points = if cornell {
-        metrics::parse_point_csv(CORNELL_POINTS_RGB, 1e-3)
-            .and_then(|refs| {
-                let elements =
-                    metrics::compare_points(&result.mesh, &result.radiosity, &refs, None)?;
-                // The smooth field the light map is filled from, at the same points.
-                let field = radiant::radiosity::smooth::SmoothField::new(
-                    &result.mesh,
-                    &result.system,
-                    &scene.surfaces,
-                    &result.radiosity,
-                );
-                let smooth = metrics::compare_points_with(&refs, None, |r| {
-                    field.radiosity_at(&result.mesh, r.position, r.normal)
-                })?;
-                Ok((elements, smooth))
-            })
-            .map_err(|e| println!("warning: no point comparison: {e}"))
-            .ok()
-    } else {
-        None
-    };
-    let out = &args.out;
-    let mut result = result;
-    let mut spectral_json = serde_json::Value::Null;
-    if args.spectral {
-        let t = std::time::Instant::now();
-        let materials = spectral_materials(&args.scene, args.spectra.as_deref())?;
-        let sp = radiant::radiosity::spectral::solve_spectral(
-            &result.system,
-            &result.mesh,
-            &scene.surfaces,
-            &materials,
-            args.bands,
-            params.solver_params.tolerance,
-        )?;
-        let seconds = t.elapsed().as_secs_f64();
-        // The difference from the RGB bake, per surface (relative, per channel).
-        let mut diffs = serde_json::Map::new();
-        let (mut worst, mut mean, mut area) = (0.0f64, 0.0, 0.0);
-        for (s, r) in sp.surfaces.iter().zip(&result.surfaces) {
-            if s.emitter {
-                continue;
-            }
-            let d: Vec<f64> = (0..3)
-                .map(|c| (s.mean[c] - r.mean[c]) / r.mean[c].abs().max(1e-12))
-                .collect();
-            worst = d.iter().fold(worst, |m, v| m.max(v.abs()));
-            mean += s.area * d.iter().map(|v| v.abs()).sum::<f64>() / 3.0;
-            area += s.area;
-            diffs.insert(s.name.clone(), json!(d));
-        }
-        let mean = if area > 0.0 { mean / area } else { 0.0 };
-        println!(
-            "spectral ({} bands, {seconds:.3} s): differs from the RGB bake by {:.1} % on average, {:.1} % at most",
-            sp.bands,
-            mean * 100.0,
-            worst * 100.0
-        );
-        if !sp.converged {
-            println!("warning: a spectral band stopped converging");
-        }
-        spectral_json = json!({
-            "bands": sp.bands,
-            "converged": sp.converged,
-            "seconds": seconds,
-            "relative_difference_from_rgb": { "mean": mean, "max": worst, "per_surface": diffs },
-        });
-        if cornell {
-            let refs = metrics::parse_point_csv(CORNELL_POINTS_SPECTRAL, 1e-3)?;
-            let c =
-                metrics::compare_points(&result.mesh, &sp.radiosity, &refs, Some("light_centre"))?;
-            println!(
-                "spectral vs Mitsuba 3 spectral path tracing at {} surface points: mean {:.2} %, max {:.2} % \
-                 (reference scaled to our light's luminance)",
-                c.points.len(),
-                c.mean_rel * 100.0,
-                c.max_rel * 100.0
+/// The bake against path-traced radiosity at the surface points shipped with a builtin
+/// scene: pointwise errors, not just surface means. Informational: a failure is a warning.
+fn rgb_points(scene: &Scene, result: &BakeResult, shipped: ShippedReferences) -> Option<Points> {
+    metrics::parse_point_csv(shipped.points_rgb, 1e-3)
+        .and_then(|refs| {
+            let elements = metrics::compare_points(&result.mesh, &result.radiosity, &refs, None)?;
+            // The smooth field the light map is filled from, at the same points.
+            let field = SmoothField::new(
+                &result.mesh,
+                &result.system,
+                &scene.surfaces,
+                &result.radiosity,
             );
-            spectral_json["vs_path_traced_points"] = points_json(&c);
-        }
-        write_atomic(
-            &out.join("surfaces_rgb.csv"),
-            output::surfaces_csv(&result.surfaces).as_bytes(),
-        )?;
-        result.surfaces = sp.surfaces;
-        result.radiosity = sp.radiosity;
+            let smooth = metrics::compare_points_with(&refs, None, |r| {
+                field.radiosity_at(&result.mesh, r.position, r.normal)
+            })?;
+            Ok((elements, smooth))
+        })
+        .map_err(|e| println!("warning: no point comparison: {e}"))
+        .ok()
+}
+
+/// Solves again in wavelength bands, reports how far that is from the RGB bake (and from
+/// spectral path tracing, where the scene ships points), writes the RGB surfaces to
+/// `surfaces_rgb.csv` and puts the spectral answer in `result`. Returns the report's part.
+fn spectral(
+    args: &BakeArgs,
+    job: &Job,
+    result: &mut BakeResult,
+) -> anyhow::Result<serde_json::Value> {
+    let t = Instant::now();
+    let materials = spectral_materials(job.shipped, args.spectra.as_deref())?;
+    let sp = radiant::radiosity::spectral::solve_spectral(
+        &result.system,
+        &result.mesh,
+        &job.scene.surfaces,
+        &materials,
+        args.bands,
+        job.params.solver_params.tolerance,
+    )?;
+    let seconds = t.elapsed().as_secs_f64();
+    let d = metrics::surface_difference(&sp.surfaces, &result.surfaces);
+    println!(
+        "spectral ({} bands, {seconds:.3} s): differs from the RGB bake by {:.1} % on average, {:.1} % at most",
+        sp.bands,
+        d.mean * 100.0,
+        d.max * 100.0
+    );
+    if !sp.converged {
+        println!("warning: a spectral band stopped converging");
     }
+    let per_surface: serde_json::Map<String, serde_json::Value> = (d.per_surface.iter())
+        .map(|(n, v)| (n.clone(), json!(v)))
+        .collect();
+    let mut out = json!({
+        "bands": sp.bands,
+        "converged": sp.converged,
+        "seconds": seconds,
+        "relative_difference_from_rgb": { "mean": d.mean, "max": d.max, "per_surface": per_surface },
+    });
+    if let Some(shipped) = job.shipped {
+        let refs = metrics::parse_point_csv(shipped.points_spectral, 1e-3)?;
+        let c = metrics::compare_points(&result.mesh, &sp.radiosity, &refs, Some("light_centre"))?;
+        println!(
+            "spectral vs Mitsuba 3 spectral path tracing at {} surface points: mean {:.2} %, max {:.2} % \
+             (reference scaled to our light's luminance)",
+            c.points.len(),
+            c.mean_rel * 100.0,
+            c.max_rel * 100.0
+        );
+        out["vs_path_traced_points"] = points_json(&c);
+    }
+    write_atomic(
+        &args.out.join("surfaces_rgb.csv"),
+        output::surfaces_csv(&result.surfaces).as_bytes(),
+    )?;
+    result.surfaces = sp.surfaces;
+    result.radiosity = sp.radiosity;
+    Ok(out)
+}
+
+/// Writes the surfaces, the patches and the light map (filled from the smooth field), and
+/// the glTF export when asked for.
+fn write_outputs(args: &BakeArgs, job: &Job, result: &BakeResult) -> anyhow::Result<Written> {
+    let out = &args.out;
     write_atomic(
         &out.join("surfaces.csv"),
         output::surfaces_csv(&result.surfaces).as_bytes(),
     )?;
     write_atomic(
         &out.join("patches.csv"),
-        output::patches_csv(&scene, &result).as_bytes(),
+        output::patches_csv(&job.scene, result).as_bytes(),
     )?;
-    // The renderer's atlas, filled from the smooth field.
     let lap = Instant::now();
-    let field = radiant::radiosity::smooth::SmoothField::new(
+    let field = SmoothField::new(
         &result.mesh,
         &result.system,
-        &scene.surfaces,
+        &job.scene.surfaces,
         &result.radiosity,
     );
-    let map = lightmap::bake_lightmap(&scene, &atlas, &result.mesh, &field);
+    let map = lightmap::bake_lightmap(&job.scene, &job.atlas, &result.mesh, &field);
     let lightmap_s = lap.elapsed().as_secs_f64();
     let lap = Instant::now();
     output::write_lightmaps(out, &map)?;
     let write_s = lap.elapsed().as_secs_f64();
     let export = match &args.export {
-        Some(path) => {
-            let lap = Instant::now();
-            let r = radiant::scene::gltf_export::export_gltf(
-                &scene,
-                Some(radiant::scene::gltf_export::LightmapExport {
-                    atlas: &atlas,
-                    texels: &map.texels,
-                }),
-                path,
-            )?;
-            println!(
-                "exported {} ({} primitives, light-map textures {:?}, {:.2} MB) in {:.2} s",
-                path.display(),
-                r.primitives,
-                r.lightmap_textures,
-                r.bytes as f64 / 1e6,
-                lap.elapsed().as_secs_f64()
-            );
-            json!({
-                "path": path.display().to_string(),
-                "primitives": r.primitives,
-                "lightmap_textures": r.lightmap_textures,
-                "lightmap_scale": r.lightmap_scale,
-                "bytes": r.bytes,
-                "seconds": lap.elapsed().as_secs_f64(),
-            })
-        }
+        Some(path) => export(job, &map, path)?,
         None => serde_json::Value::Null,
     };
-    let total_s = start.elapsed().as_secs_f64();
+    Ok(Written {
+        map,
+        lightmap_s,
+        write_s,
+        export,
+    })
+}
+
+/// `--export`: the scene with its light map as binary glTF.
+fn export(job: &Job, map: &lightmap::LightMap, path: &Path) -> anyhow::Result<serde_json::Value> {
+    use radiant::scene::gltf_export::{LightmapExport, export_gltf};
+    let lap = Instant::now();
+    let lightmap = LightmapExport {
+        atlas: &job.atlas,
+        texels: &map.texels,
+    };
+    let r = export_gltf(&job.scene, Some(lightmap), path)?;
+    println!(
+        "exported {} ({} primitives, light-map textures {:?}, {:.2} MB) in {:.2} s",
+        path.display(),
+        r.primitives,
+        r.lightmap_textures,
+        r.bytes as f64 / 1e6,
+        lap.elapsed().as_secs_f64()
+    );
+    Ok(json!({
+        "path": path.display().to_string(),
+        "primitives": r.primitives,
+        "lightmap_textures": r.lightmap_textures,
+        "lightmap_scale": r.lightmap_scale,
+        "bytes": r.bytes,
+        "seconds": lap.elapsed().as_secs_f64(),
+    }))
+}
+
+/// `report.json`: the bake's report, its parameters, the light map and the error.
+fn report_json(
+    args: &BakeArgs,
+    job: &Job,
+    result: &BakeResult,
+    w: &Written,
+    error: Option<&NamedError>,
+    total_s: f64,
+) -> serde_json::Value {
+    let (params, atlas) = (&job.params, &job.atlas);
     let extra = json!({
         "patch_size": params.mesh.patch_size,
         "element_levels": params.mesh.element_levels,
@@ -339,43 +386,43 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         "seed": params.ff.seed,
         "threads": rayon::current_num_threads(),
         "lightmap": {
-            "width": map.width,
-            "height": map.height,
-            "pages": map.pages,
+            "width": w.map.width,
+            "height": w.map.height,
+            "pages": w.map.pages,
             "texel_density": atlas.density,
             "texel_density_asked": args.texel_density,
             "charts": atlas.charts,
             "authored": atlas.authored,
             "utilisation": atlas.utilisation(),
-            "atlas_seconds": atlas_s,
-            "seconds": lightmap_s,
-            "write_seconds": write_s,
+            "atlas_seconds": job.atlas_s,
+            "seconds": w.lightmap_s,
+            "write_seconds": w.write_s,
         },
-        "export": export,
+        "export": w.export,
     });
-    let mut report = output::report_json(
-        &source,
+    output::report_json(
+        &job.source,
         &result.report,
-        import_s,
+        job.import_s,
         total_s,
-        error.as_ref().map(|(n, e)| (n.as_str(), e)),
+        error.map(|(n, e)| (n.as_str(), e)),
         extra,
-    );
-    if !spectral_json.is_null() {
-        report["spectral"] = spectral_json;
-    }
-    if let Some((c, smooth)) = &rgb_points {
-        report["points_vs_path_traced"] = points_json(c);
-        report["points_vs_path_traced"]["smooth"] = points_json(smooth);
-    }
-    write_atomic(
-        &out.join("report.json"),
-        serde_json::to_string_pretty(&report)?.as_bytes(),
-    )?;
+    )
+}
 
+/// The bake's figures on the terminal.
+fn print_summary(
+    args: &BakeArgs,
+    job: &Job,
+    result: &BakeResult,
+    total_s: f64,
+    points: Option<&Points>,
+    error: Option<&NamedError>,
+) {
     let r = &result.report;
     println!(
-        "{source}: {} patches, {} elements, {} links; {} with {} form factors",
+        "{}: {} patches, {} elements, {} links; {} with {} form factors",
+        job.source,
         r.patches,
         r.elements,
         r.links,
@@ -398,7 +445,7 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     for w in &r.warnings {
         println!("warning: {w}");
     }
-    if let Some((c, smooth)) = &rgb_points {
+    if let Some((c, smooth)) = points {
         println!(
             "RGB bake vs Mitsuba 3 RGB path tracing at {} surface points: mean {:.2} %, max {:.2} % (elements); {:.2} %, {:.2} % (the light map's smooth field)",
             c.points.len(),
@@ -408,7 +455,7 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
             smooth.max_rel * 100.0
         );
     }
-    if let Some((name, e)) = &error {
+    if let Some((name, e)) = error {
         println!(
             "error against {name}: mean {:.2} %, max {:.2} %, rms {:.2} % (emitters excluded)",
             e.mean_rel * 100.0,
@@ -418,9 +465,8 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     }
     println!(
         "wrote {}/{{surfaces.csv, patches.csv, report.json, lightmap.exr, lightmap.png}}",
-        out.display()
+        args.out.display()
     );
-    Ok(())
 }
 
 /// `radiant` with no arguments: there is no viewer in this build, so run the headless job: bake
@@ -495,158 +541,4 @@ pub fn run_default() -> anyhow::Result<()> {
         }
     );
     Ok(())
-}
-
-/// Whether this bake uses the clustered hierarchy (see `--hierarchy`).
-pub(crate) fn use_clustered(
-    hierarchy: &crate::HierarchyArgs,
-    spectral: bool,
-    scene: &radiant::scene::Scene,
-    params: &radiant::radiosity::BakeParams,
-) -> anyhow::Result<bool> {
-    use radiant::radiosity::{FormFactorKind, SolverKind};
-    let needs_triangles = [
-        (spectral, "--spectral"),
-        (
-            !matches!(params.solver, SolverKind::GaussSeidel | SolverKind::Jacobi),
-            "--method southwell or direct",
-        ),
-        (
-            !matches!(
-                params.form_factors,
-                FormFactorKind::Analytic | FormFactorKind::RayCast
-            ),
-            "--form-factors hemicube or montecarlo",
-        ),
-    ];
-    let needed = needs_triangles
-        .iter()
-        .find(|(on, _)| *on)
-        .map(|(_, what)| *what);
-    match hierarchy.hierarchy.as_str() {
-        "triangles" => Ok(false),
-        "clustered" => match needed {
-            Some(what) => anyhow::bail!(
-                "{what} needs the per-triangle hierarchy: use --hierarchy triangles (or auto)"
-            ),
-            None => Ok(true),
-        },
-        _ => {
-            if needed.is_some() {
-                return Ok(false);
-            }
-            Ok(radiant::radiosity::cluster::is_level(scene, params)?)
-        }
-    }
-}
-
-/// A bake with the clustered hierarchy, with progress on a terminal and in the log. With a
-/// `checkpoint`, it resumes from it when it fits (else says why and bakes afresh), writes it
-/// once the links are built (a crash while solving then loses no refinement) and again at the
-/// end.
-pub(crate) fn bake_clustered(
-    scene: &radiant::scene::Scene,
-    params: &radiant::radiosity::BakeParams,
-    h: &crate::HierarchyArgs,
-    checkpoint: Option<&Path>,
-) -> anyhow::Result<radiant::radiosity::BakeResult> {
-    use radiant::radiosity::cluster::{ClusterBake, ClusterParams, Phase, Watch};
-    let cp = ClusterParams {
-        memory_limit: h.memory_limit,
-        samples: h.link_samples,
-        ..ClusterParams::default()
-    };
-    let pb = progress_bar(1, "links (clustered)");
-    let last_log = std::sync::Mutex::new(Instant::now());
-    let progress = |phase: Phase, done: usize, total: usize| {
-        match phase {
-            Phase::Links => {
-                pb.set_length(total as u64);
-                pb.set_position(done as u64);
-            }
-            Phase::Solve => {
-                pb.set_message(format!("solving, sweep {done}"));
-            }
-        }
-        // Also in the log, every few seconds, for runs without a terminal.
-        if let Ok(mut t) = last_log.lock()
-            && t.elapsed().as_secs_f64() >= 5.0
-        {
-            *t = Instant::now();
-            tracing::info!(?phase, done, total, "clustered bake progress");
-        }
-    };
-    let resumed = checkpoint.filter(|p| p.exists()).and_then(|path| {
-        match ClusterBake::resume(scene, params, &cp, path) {
-            Ok(b) => {
-                println!("resumed from {} (no links refined)", path.display());
-                Some(b)
-            }
-            Err(e) => {
-                println!("not resuming: {e}; baking from scratch");
-                None
-            }
-        }
-    });
-    let mut bake = match resumed {
-        Some(b) => b,
-        None => {
-            let b = ClusterBake::new(scene, params, &cp, &progress, None)?;
-            if let Some(path) = checkpoint {
-                b.write_checkpoint(path)?;
-            }
-            b
-        }
-    };
-    bake.run_to_end(&progress, &mut Watch::default())?;
-    if let Some(path) = checkpoint {
-        bake.write_checkpoint(path)?;
-    }
-    let result = bake.finish();
-    pb.finish_and_clear();
-    if let Some(c) = &result.report.clusters {
-        println!(
-            "clustered hierarchy: {} elements, {} clusters, {} links ({:.1} per element), memory {} of {} MiB",
-            result.report.elements,
-            c.clusters,
-            result.report.links,
-            result.report.links as f64 / result.report.elements.max(1) as f64,
-            c.memory_estimate >> 20,
-            c.memory_limit >> 20
-        );
-    }
-    Ok(result)
-}
-
-/// A bake with the per-triangle hierarchy, resuming from and writing `checkpoint`.
-pub(crate) fn bake_triangles(
-    scene: &radiant::scene::Scene,
-    params: &radiant::radiosity::BakeParams,
-    checkpoint: Option<&Path>,
-) -> anyhow::Result<radiant::radiosity::BakeResult> {
-    let (bake, pb) = crate::start_bake(scene, params, checkpoint)?;
-    pb.set_length(1000);
-    pb.set_position(0);
-    let tol = params.solver_params.tolerance;
-    let result = bake.run_to_end(&mut |BakeEvent::Solve(p, t)| {
-        // Progress in log-residual, from 1 down to the tolerance.
-        let frac = if p.residual > 0.0 {
-            (p.residual.ln() / tol.ln()).clamp(0.0, 1.0)
-        } else {
-            1.0
-        };
-        pb.set_position((frac * 1000.0) as u64);
-        pb.set_message(format!("solving, residual {:.1e}", p.residual));
-        tracing::debug!(
-            t,
-            iterations = p.iterations,
-            residual = p.residual,
-            "solver step"
-        );
-    })?;
-    pb.finish_and_clear();
-    if let Some(path) = checkpoint {
-        result.write_checkpoint(path)?;
-    }
-    Ok(result)
 }

@@ -7,10 +7,11 @@ use radiant::radiosity::metrics::{self, ErrorStats};
 use radiant::radiosity::solvers::{Direct, Solver};
 use radiant::radiosity::{Bake, FormFactorKind, Rgb, SolveError, SolverKind};
 
-use crate::bake_cmd::{NamedReference, progress_bar, reference_for};
+use crate::ConvergeArgs;
+use crate::args::{Hierarchy, Method, Reference};
+use crate::common::{NamedReference, load_scene, progress_bar, reference_for};
 use crate::output::{ensure_dir, write_atomic};
 use crate::plot::{Curve, plot_convergence};
-use crate::{ConvergeArgs, load_scene, parse_ff, parse_solver};
 
 /// One row of `convergence.csv`.
 struct Row {
@@ -23,31 +24,22 @@ struct Row {
 pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
     args.solve.init_threads()?;
     let (scene, source) = load_scene(&args.scene)?;
-    let gpu = args.methods.iter().any(|m| m == "gpu-hemicube");
+    let gpu = args.methods.contains(&Method::GpuHemicube);
     #[cfg(not(feature = "render"))]
     anyhow::ensure!(
         !gpu,
         "gpu-hemicube needs a build with the `render` feature (wgpu)"
     );
-    let solvers = args
-        .methods
-        .iter()
-        .filter(|m| *m != "gpu-hemicube")
-        .map(|m| parse_solver(m))
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    let ffs = args
-        .form_factors
-        .iter()
-        .map(|f| parse_ff(f))
-        .collect::<anyhow::Result<Vec<_>>>()?;
+    let solvers: Vec<SolverKind> = args.methods.iter().filter_map(|m| m.solver()).collect();
+    let ffs: Vec<FormFactorKind> = args.form_factors.iter().map(|f| f.0).collect();
     anyhow::ensure!(
         args.sample_every > 0.0 && args.sample_every.is_finite(),
         "--sample-every must be positive"
     );
-    let clustered = match args.hierarchy.as_str() {
-        "clustered" => true,
-        "triangles" => false,
-        _ => radiant::radiosity::cluster::is_level(
+    let clustered = match args.hierarchy {
+        Hierarchy::Clustered => true,
+        Hierarchy::Triangles => false,
+        Hierarchy::Auto => radiant::radiosity::cluster::is_level(
             &scene,
             &args
                 .solve
@@ -81,7 +73,7 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
         for &solver in &solvers {
             let label = format!("{} / {}", solver.name(), ff.name());
             let mut params = args.solve.params(solver, ff)?;
-            params.time_limit = Some(crate::seconds(time_limit)?);
+            params.time_limit = Some(crate::common::seconds(time_limit)?);
             let pb = progress_bar(1, &label);
             let mut bake = match Bake::with_progress(&scene, &params, &|d, n| {
                 pb.set_length(n as u64);
@@ -118,7 +110,7 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
             let mut rows = Vec::new();
             let mut last = None;
             loop {
-                let p = match bake.step(crate::seconds(args.sample_every)?) {
+                let p = match bake.step(crate::common::seconds(args.sample_every)?) {
                     Ok(p) => p,
                     Err(e) => {
                         println!("{label}: stopped: {e}");
@@ -272,16 +264,16 @@ fn unreachable_reference() -> anyhow::Result<ErrorStats> {
 }
 
 /// The per-surface reference: `direct` gives none (the direct solve is used), `path` traces
-/// the scene here, a file is read; by default the shipped Mitsuba reference of the builtin
-/// Cornell box, else `path`.
+/// the scene here, a file is read; by default the reference shipped with a builtin scene,
+/// else `path`.
 fn choose_reference(
     args: &ConvergeArgs,
     scene: &radiant::scene::Scene,
 ) -> anyhow::Result<Option<NamedReference>> {
-    match args.reference.as_deref() {
-        Some("direct") => Ok(None),
-        Some("path") => path_traced(args, scene).map(Some),
-        Some(file) => reference_for(&args.scene, Some(std::path::Path::new(file))),
+    match &args.reference {
+        Some(Reference::Direct) => Ok(None),
+        Some(Reference::Path) => path_traced(args, scene).map(Some),
+        Some(Reference::File(file)) => reference_for(&args.scene, Some(file)),
         None => match reference_for(&args.scene, None)? {
             Some(r) => Ok(Some(r)),
             None => path_traced(args, scene).map(Some),

@@ -6,12 +6,13 @@ use std::time::Instant;
 use radiant::radiosity::metrics::{self, ErrorStats};
 use serde_json::json;
 
-use crate::bake_cmd::reference_for;
+use crate::args::Method;
+use crate::common::{load_scene, reference_for};
 use crate::output::{self, ensure_dir, write_atomic};
-use crate::{BakeArgs, SolveArgs, load_scene};
+use crate::{BakeArgs, SolveArgs};
 
 /// The method's name on the command line.
-pub const GPU_HEMICUBE: &str = "gpu-hemicube";
+const GPU_HEMICUBE: &str = Method::GPU_HEMICUBE;
 
 /// One sweep of a gather, for `convergence.csv` and `report.json`.
 pub struct Sample {

@@ -1,6 +1,9 @@
 //! The `radiant` command line: bake a scene, or measure error against run time.
 
+mod args;
 mod bake_cmd;
+mod baking;
+mod common;
 mod converge_cmd;
 #[cfg(feature = "render")]
 mod gather_cmd;
@@ -16,7 +19,12 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
-use radiant::radiosity::{BakeParams, FormFactorKind, SolverKind};
+use radiant::radiosity::cluster::ClusterParams;
+use radiant::radiosity::{
+    BakeParams, FormFactorKind, FormFactorParams, LinkParams, MeshParams, SolverKind, SolverParams,
+};
+
+use args::{FormFactors, Hierarchy, Method, Reference};
 
 /// Radiosity light baking: diffuse global illumination with honest error reporting.
 #[derive(Parser, Debug)]
@@ -52,9 +60,9 @@ pub(crate) struct SceneArgs {
     /// A glTF 2.0 file (.gltf or .glb).
     #[arg(required_unless_present = "builtin", conflicts_with = "builtin")]
     pub(crate) scene: Option<PathBuf>,
-    /// A builtin scene instead of a file: cornell-box.
-    #[arg(long)]
-    pub(crate) builtin: Option<String>,
+    /// A builtin scene instead of a file.
+    #[arg(long, value_enum)]
+    pub(crate) builtin: Option<args::BuiltinScene>,
     /// Sky light, in emissive units: L or R,G,B (uniform radiance), gradient:ZENITH/HORIZON
     /// (each L or R,G,B), FILE.hdr or FILE.exr with an optional @SCALE (equirectangular), or
     /// none. Replaces the glTF scene extras' radiant.sky.
@@ -69,21 +77,21 @@ pub(crate) struct SolveArgs {
     #[arg(long)]
     pub(crate) patch_size: Option<f64>,
     /// Subdivision levels from patches down to elements; each level splits a triangle in 4.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = MeshParams::default().element_levels)]
     pub(crate) element_levels: u8,
     /// Sky light: rays per element, stratified (used only when there is a sky).
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = FormFactorParams::default().sky_rays)]
     pub(crate) sky_rays: u32,
     /// Link refinement threshold (smaller: more accurate, slower).
-    #[arg(long, default_value_t = 0.02)]
+    #[arg(long, default_value_t = LinkParams::default().refinement)]
     pub(crate) refinement: f64,
     /// Far-field factor: above the patch level, link coarser sources whose transport is below
     /// this times the refinement threshold.
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = LinkParams::default().far_field)]
     pub(crate) far_field: f64,
     /// Estimated relative error at which the solver stops: the relative residual divided by
     /// 1 − ρ̂ (ρ̂: largest reflectance × row sum), so stiff scenes do not stop early.
-    #[arg(long, default_value_t = 1e-4)]
+    #[arg(long, default_value_t = SolverParams::default().tolerance)]
     pub(crate) tolerance: f64,
     /// Stop solving after this many seconds, converged or not.
     #[arg(long)]
@@ -92,16 +100,16 @@ pub(crate) struct SolveArgs {
     #[arg(long)]
     pub(crate) threads: Option<usize>,
     /// Seed for every random choice.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = FormFactorParams::default().seed)]
     pub(crate) seed: u64,
     /// Hemicube resolution (pixels along the top face).
-    #[arg(long, default_value_t = 128)]
+    #[arg(long, default_value_t = FormFactorParams::default().hemicube_resolution)]
     pub(crate) hemicube_resolution: u32,
     /// Monte Carlo rays per element.
-    #[arg(long, default_value_t = 256)]
+    #[arg(long, default_value_t = FormFactorParams::default().monte_carlo_rays)]
     pub(crate) mc_rays: u32,
     /// Largest element count for the direct solver.
-    #[arg(long, default_value_t = 4096)]
+    #[arg(long, default_value_t = SolverParams::default().max_direct)]
     pub(crate) max_direct: usize,
 }
 
@@ -116,13 +124,13 @@ pub(crate) struct BakeArgs {
     /// Solver: jacobi, gauss-seidel, southwell (progressive shooting) or direct; or
     /// gpu-hemicube: the GPU gathers on hemicubes at every light-map texel, with no form
     /// factors (Jacobi sweeps, --hemicube-resolution, --texel-density; needs a GPU adapter).
-    #[arg(long, default_value = "gauss-seidel")]
-    pub(crate) method: String,
-    /// Form factors: analytic, hemicube, raycast or montecarlo.
-    #[arg(long, default_value = "analytic")]
-    pub(crate) form_factors: String,
-    /// Per-surface reference CSV to report the error against (default for the builtin Cornell
-    /// box: the shipped Mitsuba 3 reference).
+    #[arg(long, value_enum, default_value_t = Method::Solver(BakeParams::default().solver))]
+    pub(crate) method: Method,
+    /// Form factors.
+    #[arg(long, value_enum, default_value_t = FormFactors(BakeParams::default().form_factors))]
+    pub(crate) form_factors: FormFactors,
+    /// Per-surface reference CSV to report the error against (default for a builtin scene:
+    /// the reference shipped with it; the Cornell box's is Mitsuba 3's).
     #[arg(long)]
     pub(crate) reference: Option<PathBuf>,
     /// Also solve in wavelength bands with measured spectra (the builtin Cornell box has them;
@@ -149,7 +157,7 @@ pub(crate) struct BakeArgs {
     /// Light-map texels per scene unit (metres for glTF); default: automatic (about 256
     /// texels per triangle, 8 M at most; Sponza gets 18 per metre). Lowered where the charts
     /// would not fit one 8192² page.
-    #[arg(long, value_parser = crate::parse_texel_density)]
+    #[arg(long, value_parser = crate::args::parse_texel_density)]
     pub(crate) texel_density: Option<f64>,
     /// Largest light-map page side in texels (64 to 8192): charts that do not fit one page go
     /// on several (`lightmap.exr` stacks them top to bottom; `--export` writes one image each).
@@ -171,52 +179,15 @@ pub(crate) struct HierarchyArgs {
     /// method; checkpoints of version 2), or `auto`:
     /// clustered when the scene has more than 4096 triangles or the per-triangle mesh would
     /// have more than 65 536 elements, and no option needs the per-triangle bake.
-    #[arg(long, default_value = "auto", value_parser = ["auto", "clustered", "triangles"])]
-    pub(crate) hierarchy: String,
+    #[arg(long, value_enum, default_value_t = Hierarchy::Auto)]
+    pub(crate) hierarchy: Hierarchy,
     /// Memory budget of a clustered bake, e.g. 4G, 512M or bytes (default: 60 % of the
     /// available memory). Over it the bake coarsens, and refuses with an error in the end.
-    #[arg(long, value_parser = parse_size)]
+    #[arg(long, value_parser = args::parse_size)]
     pub(crate) memory_limit: Option<u64>,
     /// Visibility samples per link of a clustered bake.
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = ClusterParams::default().samples)]
     pub(crate) link_samples: u32,
-}
-
-/// `4G`, `512M`, `64K` or a number of bytes.
-/// `--texel-density`: a positive, finite number of texels per scene unit.
-pub(crate) fn parse_texel_density(s: &str) -> Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(d) if d.is_finite() && d > 0.0 => Ok(d),
-        _ => Err(format!(
-            "{s:?} is not a positive number of texels per scene unit"
-        )),
-    }
-}
-
-fn parse_size(s: &str) -> Result<u64, String> {
-    let t = s.trim();
-    let (num, mul) = match t.char_indices().last() {
-        Some((i, c)) if c.is_ascii_alphabetic() => {
-            let mul: u64 = match c.to_ascii_uppercase() {
-                'K' => 1 << 10,
-                'M' => 1 << 20,
-                'G' => 1 << 30,
-                'T' => 1 << 40,
-                _ => return Err(format!("'{s}': use a number with K, M, G or T")),
-            };
-            (&t[..i], mul)
-        }
-        _ => (t, 1),
-    };
-    let v: f64 = num
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{s}' is not a size (e.g. 4G, 512M)"))?;
-    let bytes = v * mul as f64;
-    if !(1.0..1.8e19).contains(&bytes) {
-        return Err(format!("'{s}' is not a size between 1 byte and 16 EiB"));
-    }
-    Ok(bytes as u64)
 }
 
 /// `radiant converge`.
@@ -229,25 +200,19 @@ pub(crate) struct ConvergeArgs {
     pub(crate) out: PathBuf,
     /// Solvers to run, comma separated; `gpu-hemicube` adds the GPU gather's curve (against
     /// a per-surface reference).
-    #[arg(
-        long,
-        value_delimiter = ',',
-        default_value = "jacobi,gauss-seidel,southwell,direct"
-    )]
-    pub(crate) methods: Vec<String>,
+    #[arg(long, value_enum, value_delimiter = ',',
+          default_values_t = SolverKind::ALL.map(Method::Solver))]
+    pub(crate) methods: Vec<Method>,
     /// Form-factor methods to run, comma separated.
-    #[arg(
-        long,
-        value_delimiter = ',',
-        default_value = "analytic,hemicube,raycast,montecarlo"
-    )]
-    pub(crate) form_factors: Vec<String>,
+    #[arg(long, value_enum, value_delimiter = ',',
+          default_values_t = FormFactorKind::ALL.map(FormFactors))]
+    pub(crate) form_factors: Vec<FormFactors>,
     /// `path` (path-trace the scene first with `radiant reference`'s tracer: total error),
     /// `direct` (the direct solve on the same mesh: solver error only) or a per-surface CSV
     /// (total error; `radiant reference` writes one). Default: the shipped Mitsuba 3 reference
     /// for the builtin Cornell box, else `path`.
-    #[arg(long)]
-    pub(crate) reference: Option<String>,
+    #[arg(long, value_parser = args::parse_reference)]
+    pub(crate) reference: Option<Reference>,
     /// Target relative standard error of each surface for `--reference path`.
     #[arg(long, default_value_t = 0.005)]
     pub(crate) reference_error: f64,
@@ -257,8 +222,8 @@ pub(crate) struct ConvergeArgs {
     /// Link hierarchy to measure: `triangles` (one curve per solver × form-factor method, as
     /// the solve progresses), `clustered` (one curve of clustered bakes at --refinements, each
     /// point a whole bake), or `auto` (as `bake` chooses).
-    #[arg(long, default_value = "auto", value_parser = ["auto", "clustered", "triangles"])]
-    pub(crate) hierarchy: String,
+    #[arg(long, value_enum, default_value_t = Hierarchy::Auto)]
+    pub(crate) hierarchy: Hierarchy,
     /// Refinement thresholds of the clustered curve, coarse to fine.
     #[arg(
         long,
@@ -267,7 +232,7 @@ pub(crate) struct ConvergeArgs {
     )]
     pub(crate) refinements: Vec<f64>,
     /// Memory budget of each clustered bake (as `bake --memory-limit`).
-    #[arg(long, value_parser = parse_size)]
+    #[arg(long, value_parser = args::parse_size)]
     pub(crate) memory_limit: Option<u64>,
     /// Seconds between error samples.
     #[arg(long, default_value_t = 0.01)]
@@ -315,7 +280,7 @@ impl SolveArgs {
                 t > 0.0 && t.is_finite(),
                 "--time-limit {t} must be a positive number of seconds"
             );
-            p.time_limit = Some(seconds(t)?);
+            p.time_limit = Some(common::seconds(t)?);
         }
         Ok(p)
     }
@@ -330,94 +295,6 @@ impl SolveArgs {
         }
         Ok(())
     }
-}
-
-/// Starts a bake, resuming from `checkpoint` when it exists and fits the scene, with a
-/// progress bar over the form factors; the bar is returned, set to "solving", for the solve.
-pub(crate) fn start_bake(
-    scene: &radiant::scene::Scene,
-    params: &BakeParams,
-    checkpoint: Option<&std::path::Path>,
-) -> anyhow::Result<(radiant::radiosity::Bake, indicatif::ProgressBar)> {
-    let pb = bake_cmd::progress_bar(1, "form factors");
-    let resumed = checkpoint.filter(|p| p.exists()).and_then(|path| {
-        match radiant::radiosity::Bake::resume(scene, params, path) {
-            Ok(b) => {
-                println!("resumed from {} (no form factors computed)", path.display());
-                Some(b)
-            }
-            Err(e) => {
-                println!("not resuming: {e}; baking from scratch");
-                None
-            }
-        }
-    });
-    let bake = match resumed {
-        Some(b) => b,
-        None => radiant::radiosity::Bake::with_progress(scene, params, &|done, total| {
-            pb.set_length(total as u64);
-            pb.set_position(done as u64);
-        })?,
-    };
-    pb.set_message("solving");
-    Ok((bake, pb))
-}
-
-/// Seconds as a `Duration`, with a clear error instead of a panic for absurd values.
-pub(crate) fn seconds(t: f64) -> anyhow::Result<std::time::Duration> {
-    std::time::Duration::try_from_secs_f64(t)
-        .map_err(|_| anyhow::anyhow!("{t} seconds is out of range"))
-}
-
-/// Parses a solver name.
-pub(crate) fn parse_solver(s: &str) -> anyhow::Result<SolverKind> {
-    SolverKind::parse(s).ok_or_else(|| {
-        anyhow::anyhow!(
-            "unknown method '{s}' (jacobi, gauss-seidel, southwell, direct, gpu-hemicube)"
-        )
-    })
-}
-
-/// Parses a form-factor method name.
-pub(crate) fn parse_ff(s: &str) -> anyhow::Result<FormFactorKind> {
-    FormFactorKind::parse(s).ok_or_else(|| {
-        anyhow::anyhow!(
-            "unknown form-factor method '{s}' (analytic, hemicube, raycast, montecarlo)"
-        )
-    })
-}
-
-/// Loads the scene named by the arguments, with the sky `--sky` gives.
-pub(crate) fn load_scene(args: &SceneArgs) -> anyhow::Result<(radiant::scene::Scene, String)> {
-    let (mut scene, name) = match (&args.scene, &args.builtin) {
-        (_, Some(name)) => (radiant::scene::builtin(name)?, name.clone()),
-        (Some(path), None) => {
-            let scene = radiant::scene::load_gltf(path)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-            (scene, path.display().to_string())
-        }
-        (None, None) => anyhow::bail!("give a scene file or --builtin cornell-box"),
-    };
-    apply_sky(&mut scene, args.sky.as_deref())?;
-    Ok((scene, name))
-}
-
-/// Replaces the scene's sky with `--sky` (`none` removes it).
-pub(crate) fn apply_sky(
-    scene: &mut radiant::scene::Scene,
-    sky: Option<&str>,
-) -> anyhow::Result<()> {
-    match sky.map(str::trim) {
-        None => {}
-        Some("none") => scene.sky = None,
-        Some(spec) => {
-            scene.sky = Some(
-                radiant::scene::Sky::parse(spec, None)
-                    .map_err(|e| anyhow::anyhow!("--sky {spec}: {e}"))?,
-            );
-        }
-    }
-    Ok(())
 }
 
 /// `radiant` alone: the viewer on the Cornell box, or the headless path without a display.
@@ -452,7 +329,21 @@ fn run_no_arguments() -> anyhow::Result<()> {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        // Help and version go to stdout as clap writes them.
+        Err(e) if !e.use_stderr() => e.exit(),
+        Err(e) => {
+            // As every other error: one line (clap's own spans several).
+            let text = e.render().to_string();
+            let parts: Vec<&str> = (text.lines().map(str::trim))
+                .filter(|l| !l.is_empty())
+                .collect();
+            let line = parts.join(" ");
+            eprintln!("error: {}", line.strip_prefix("error: ").unwrap_or(&line));
+            return ExitCode::FAILURE;
+        }
+    };
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_env("RUST_LOG")

@@ -13,9 +13,9 @@ use radiant::reference::{
 use radiant::scene::Scene;
 use serde_json::{Value, json};
 
-use crate::bake_cmd::progress_bar;
+use crate::SceneArgs;
+use crate::common::{load_scene, progress_bar};
 use crate::output::{csv_name, ensure_dir, exr_bytes, preview_png, write_atomic};
-use crate::{SceneArgs, load_scene};
 
 /// `radiant reference`.
 #[derive(Args, Debug)]
@@ -78,7 +78,7 @@ pub(crate) fn stopping_rules(
                 t > 0.0 && t.is_finite(),
                 "--time-limit {t} must be a positive number of seconds"
             );
-            Some(crate::seconds(t)?)
+            Some(crate::common::seconds(t)?)
         }
         (None, true) => Some(std::time::Duration::from_secs(600)),
         (None, false) => None,

@@ -6,19 +6,23 @@ use std::time::Instant;
 
 use anyhow::Context;
 use clap::Args;
-use radiant::color::Tonemap;
 use radiant::post::frame::{FrameRenderer, FrameSettings};
+use radiant::radiosity::BakeParams;
 use radiant::render::GpuContext;
 use radiant::render::capture::{write_exr, write_png};
 use radiant::render::lighting::DebugView;
+use radiant::scene::Builtin;
 use serde_json::json;
 
 /// Mitsuba 3 path-traced radiance of the builtin Cornell box from its camera, 128×128, 16 384
 /// spp (tools/make_cornell_render_reference.py).
 const CORNELL_RENDER_REFERENCE: &[u8] =
     include_bytes!("../assets/reference/cornell_box_mitsuba_128.exr");
+use crate::args::{Debug, FormFactors, Solver, Tonemap};
+use crate::baking;
+use crate::common::load_scene;
 use crate::output::{ensure_dir, write_atomic};
-use crate::{SceneArgs, SolveArgs, load_scene, parse_ff, parse_solver};
+use crate::{SceneArgs, SolveArgs};
 
 /// `radiant render`.
 #[derive(Args, Debug)]
@@ -40,26 +44,26 @@ pub(crate) struct RenderArgs {
     /// Apply SSAO and bloom to frame.exr too (by default it is pure radiance).
     #[arg(long)]
     pub(crate) exr_effects: bool,
-    /// Tone-map operator: clamp (or none), reinhard, reinhard-extended, aces, agx, pbr-neutral.
-    #[arg(long, default_value = "aces")]
-    pub(crate) tonemap: String,
+    /// Tone-map operator.
+    #[arg(long, value_enum, default_value_t = Tonemap(FrameSettings::default().tonemapping.operator))]
+    pub(crate) tonemap: Tonemap,
     /// Exposure in stops.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub(crate) exposure: f32,
-    /// Debug view: lit, albedo, normal, material, lightmap, emissive, depth, ao, direct.
-    #[arg(long, default_value = "lit")]
-    pub(crate) debug: String,
+    /// Debug view.
+    #[arg(long, value_enum, default_value_t = Debug(FrameSettings::default().debug_view))]
+    pub(crate) debug: Debug,
     /// Light-map texels per scene unit (metres for glTF); default: automatic (about 256
     /// texels per triangle, 8 M at most; Sponza gets 18 per metre). Lowered where the charts
     /// would not fit one 8192² page.
-    #[arg(long, value_parser = crate::parse_texel_density)]
+    #[arg(long, value_parser = crate::args::parse_texel_density)]
     pub(crate) texel_density: Option<f64>,
     /// Solver for the bake.
-    #[arg(long, default_value = "gauss-seidel")]
-    pub(crate) method: String,
+    #[arg(long, value_enum, default_value_t = Solver(BakeParams::default().solver))]
+    pub(crate) method: Solver,
     /// Form factors for the bake.
-    #[arg(long, default_value = "analytic")]
-    pub(crate) form_factors: String,
+    #[arg(long, value_enum, default_value_t = FormFactors(BakeParams::default().form_factors))]
+    pub(crate) form_factors: FormFactors,
     /// Checkpoint file: load the bake from it when it matches the scene, and write it after
     /// baking.
     #[arg(long)]
@@ -98,25 +102,10 @@ fn parse_size(s: &str) -> anyhow::Result<(u32, u32)> {
 
 /// Frame settings from the flags.
 fn settings(args: &RenderArgs) -> anyhow::Result<FrameSettings> {
-    let operator = Tonemap::from_name(&args.tonemap).with_context(|| {
-        format!(
-            "--tonemap {:?}: expected one of none, clamp, reinhard, reinhard-extended, aces, agx, pbr-neutral",
-            args.tonemap
-        )
-    })?;
-    let debug_view = DebugView::ALL
-        .into_iter()
-        .find(|v| v.name() == args.debug)
-        .with_context(|| {
-            format!(
-                "--debug {:?}: expected lit, albedo, normal, material, lightmap, emissive, depth, ao or direct",
-                args.debug
-            )
-        })?;
     let mut s = FrameSettings::default();
-    s.tonemapping.operator = operator;
+    s.tonemapping.operator = args.tonemap.0;
     s.tonemapping.exposure = args.exposure;
-    s.debug_view = debug_view;
+    s.debug_view = args.debug.0;
     if args.no_ssao {
         s.ssao = None;
     }
@@ -131,21 +120,20 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let (w, h) = parse_size(&args.size)?;
     let frame_settings = settings(args)?;
     args.solve.init_threads()?;
-    let params = args
-        .solve
-        .params(parse_solver(&args.method)?, parse_ff(&args.form_factors)?)?;
+    let params = args.solve.params(args.method.0, args.form_factors.0)?;
     let (scene, source) = load_scene(&args.scene)?;
     ensure_dir(&args.out)?;
     let start = Instant::now();
 
     // No emitters: nothing to bake, and nothing is allocated for it.
     let bake = if scene.has_emitters() {
-        let clustered = crate::bake_cmd::use_clustered(&args.hierarchy, false, &scene, &params)?;
+        let h = &args.hierarchy;
+        let clustered = baking::use_clustered(h.hierarchy, false, &scene, &params)?;
         let checkpoint = args.checkpoint.as_deref();
         Some(if clustered {
-            crate::bake_cmd::bake_clustered(&scene, &params, &args.hierarchy, checkpoint)?
+            baking::bake_clustered(&scene, &params, h, checkpoint)?
         } else {
-            crate::bake_cmd::bake_triangles(&scene, &params, checkpoint)?
+            baking::bake_triangles(&scene, &params, checkpoint)?
         })
     } else {
         println!("{source}: no emitters, so no bake; the frame shows punctual lights and emission");
@@ -178,9 +166,9 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     write_exr(&args.out.join("frame.exr"), &exr)?;
 
     // Error against a path tracer from the same camera: radiance, no SSAO, no bloom.
-    let reference = match (&args.reference_image, args.scene.builtin.as_deref()) {
+    let reference = match (&args.reference_image, args.scene.builtin) {
         (Some(p), _) => Some(std::fs::read(p).with_context(|| format!("{}", p.display()))?),
-        (None, Some("cornell-box" | "cornell_box" | "cornell")) => {
+        (None, Some(crate::args::BuiltinScene(Builtin::CornellBox))) => {
             Some(CORNELL_RENDER_REFERENCE.to_vec())
         }
         _ => None,

@@ -4,7 +4,10 @@ use std::path::PathBuf;
 
 use clap::Args;
 
-use crate::{SolveArgs, parse_ff, parse_solver};
+use radiant::radiosity::BakeParams;
+
+use crate::SolveArgs;
+use crate::args::{BuiltinScene, FormFactors, Solver};
 
 /// `radiant view`.
 #[derive(Args, Debug)]
@@ -12,9 +15,9 @@ pub(crate) struct ViewArgs {
     /// A glTF 2.0 file (.gltf or .glb); default: the builtin Cornell box.
     #[arg(conflicts_with = "builtin")]
     pub(crate) scene: Option<PathBuf>,
-    /// A builtin scene instead of a file: cornell-box.
-    #[arg(long)]
-    pub(crate) builtin: Option<String>,
+    /// A builtin scene instead of a file.
+    #[arg(long, value_enum)]
+    pub(crate) builtin: Option<BuiltinScene>,
     /// Sky light, as for `bake --sky`.
     #[arg(long)]
     pub(crate) sky: Option<String>,
@@ -30,16 +33,16 @@ pub(crate) struct ViewArgs {
     /// The bake's checkpoint: resumed from when it fits the scene, written on close.
     #[arg(long, default_value = "radiant-out/viewer.checkpoint")]
     pub(crate) checkpoint: PathBuf,
-    /// Solver: jacobi, gauss-seidel, southwell or direct.
-    #[arg(long, default_value = "gauss-seidel")]
-    pub(crate) method: String,
-    /// Form factors: analytic, hemicube, raycast or montecarlo.
-    #[arg(long, default_value = "analytic")]
-    pub(crate) form_factors: String,
+    /// Solver.
+    #[arg(long, value_enum, default_value_t = Solver(BakeParams::default().solver))]
+    pub(crate) method: Solver,
+    /// Form factors.
+    #[arg(long, value_enum, default_value_t = FormFactors(BakeParams::default().form_factors))]
+    pub(crate) form_factors: FormFactors,
     /// Light-map texels per scene unit (metres for glTF); default: automatic (about 256
     /// texels per triangle, 8 M at most; Sponza gets 18 per metre). Lowered where the charts
     /// would not fit one 8192² page.
-    #[arg(long, value_parser = crate::parse_texel_density)]
+    #[arg(long, value_parser = crate::args::parse_texel_density)]
     pub(crate) texel_density: Option<f64>,
     #[command(flatten)]
     pub(crate) solve: SolveArgs,
@@ -67,14 +70,12 @@ pub(crate) fn run(args: &ViewArgs) -> anyhow::Result<()> {
             path.display().to_string(),
         ),
         (_, builtin) => {
-            let name = builtin.clone().unwrap_or_else(|| "cornell-box".into());
-            (radiant::scene::builtin(&name)?, name)
+            let b = builtin.map_or(radiant::scene::Builtin::CornellBox, |b| b.0);
+            (b.scene()?, b.name().to_string())
         }
     };
-    crate::apply_sky(&mut scene, args.sky.as_deref())?;
-    let params = args
-        .solve
-        .params(parse_solver(&args.method)?, parse_ff(&args.form_factors)?)?;
+    crate::common::apply_sky(&mut scene, args.sky.as_deref())?;
+    let params = args.solve.params(args.method.0, args.form_factors.0)?;
     args.solve.init_threads()?;
     if let Some(dir) = args
         .checkpoint

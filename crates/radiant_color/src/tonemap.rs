@@ -57,11 +57,16 @@ impl Tonemap {
 
     /// Parses a CLI name (see [`Tonemap::name`]; `none` is an alias of `clamp`).
     pub fn from_name(name: &str) -> Option<Tonemap> {
-        if name == "none" {
-            return Some(Tonemap::Clamp);
-        }
-        Self::ALL.into_iter().find(|t| t.name() == name)
+        (Self::ALL.into_iter().find(|t| t.name() == name)).or_else(|| {
+            Self::ALIASES
+                .iter()
+                .find(|(a, _)| *a == name)
+                .map(|&(_, t)| t)
+        })
     }
+
+    /// Other names each operator is known by.
+    pub const ALIASES: &[(&str, Tonemap)] = &[("none", Tonemap::Clamp)];
 
     /// Applies the operator to one exposed linear colour.
     pub fn apply(self, rgb: [f64; 3]) -> [f64; 3] {

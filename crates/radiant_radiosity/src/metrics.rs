@@ -224,6 +224,68 @@ pub const CORNELL_POINTS_RGB: &str =
 pub const CORNELL_POINTS_SPECTRAL: &str =
     include_str!("../../../assets/reference/cornell_points_spectral_mitsuba.csv");
 
+/// The measured spectra of the builtin Cornell box's materials (`--spectral`; the format of a
+/// spectra side file).
+pub const CORNELL_BOX_SPECTRA: &str = include_str!("../../../assets/cornell_box_spectra.json");
+
+/// What ships with a builtin scene to measure a bake against.
+#[derive(Clone, Copy, Debug)]
+pub struct ShippedReferences {
+    /// Where the per-surface reference comes from.
+    pub surfaces_source: &'static str,
+    /// The per-surface reference ([`parse_reference_csv`]).
+    pub surfaces: &'static str,
+    /// Path-traced radiosity at surface points, RGB materials ([`parse_point_csv`]).
+    pub points_rgb: &'static str,
+    /// The same points with the measured spectra.
+    pub points_spectral: &'static str,
+    /// The measured spectra of its materials.
+    pub spectra: &'static str,
+}
+
+/// The references shipped with a builtin scene.
+pub fn shipped_references(scene: radiant_scene::Builtin) -> ShippedReferences {
+    match scene {
+        radiant_scene::Builtin::CornellBox => ShippedReferences {
+            surfaces_source: "Mitsuba 3 path-traced irradiance meters (assets/reference)",
+            surfaces: CORNELL_BOX_REFERENCE,
+            points_rgb: CORNELL_POINTS_RGB,
+            points_spectral: CORNELL_POINTS_SPECTRAL,
+            spectra: CORNELL_BOX_SPECTRA,
+        },
+    }
+}
+
+/// How far one per-surface solution (the spectral one, say) is from another (the RGB bake),
+/// emitters left out: relative per channel, area-weighted mean and max.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SurfaceDifference {
+    /// Area-weighted mean of the channels' mean relative difference.
+    pub mean: f64,
+    /// The largest relative difference of any channel.
+    pub max: f64,
+    /// Each surface's relative difference per channel.
+    pub per_surface: Vec<(String, Rgb)>,
+}
+
+/// The relative difference of `a` from `b`, surface by surface (the two in the same order).
+pub fn surface_difference(a: &[SurfaceMean], b: &[SurfaceMean]) -> SurfaceDifference {
+    let (mut max, mut mean, mut area) = (0.0f64, 0.0, 0.0);
+    let mut per_surface = Vec::new();
+    for (s, r) in a.iter().zip(b).filter(|(s, _)| !s.emitter) {
+        let d: Rgb = std::array::from_fn(|c| (s.mean[c] - r.mean[c]) / r.mean[c].abs().max(1e-12));
+        max = d.iter().fold(max, |m, v| m.max(v.abs()));
+        mean += s.area * d.iter().map(|v| v.abs()).sum::<f64>() / 3.0;
+        area += s.area;
+        per_surface.push((s.name.clone(), d));
+    }
+    SurfaceDifference {
+        mean: if area > 0.0 { mean / area } else { 0.0 },
+        max,
+        per_surface,
+    }
+}
+
 /// A path-traced radiosity at one surface point: Mitsuba radiance meters 1 mm off the surface,
 /// looking back into it (`tools`: `cornell_mitsuba.py points`).
 #[derive(Clone, Debug, PartialEq)]
@@ -404,4 +466,40 @@ pub fn compare_points_with(
         scale,
         points,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn mean(name: &str, area: f64, mean: Rgb, emitter: bool) -> SurfaceMean {
+        SurfaceMean {
+            name: name.into(),
+            area,
+            mean,
+            emitter,
+        }
+    }
+
+    #[test]
+    fn the_surface_difference_is_relative_area_weighted_and_leaves_emitters_out() {
+        let b = [
+            mean("light", 1.0, [10.0; 3], true),
+            mean("wall", 1.0, [1.0, 1.0, 1.0], false),
+            mean("floor", 3.0, [2.0, 2.0, 2.0], false),
+        ];
+        let a = [
+            mean("light", 1.0, [20.0; 3], true),
+            mean("wall", 1.0, [1.1, 1.0, 0.7], false),
+            mean("floor", 3.0, [2.0, 2.0, 2.0], false),
+        ];
+        let d = surface_difference(&a, &b);
+        assert_eq!(d.per_surface.len(), 2);
+        assert!((d.max - 0.3).abs() < 1e-12, "{}", d.max);
+        // The wall's mean |difference| is (0.1 + 0 + 0.3) / 3, a quarter of the area.
+        assert!((d.mean - 0.4 / 3.0 / 4.0).abs() < 1e-12, "{}", d.mean);
+        let s = shipped_references(radiant_scene::Builtin::CornellBox);
+        assert!(parse_reference_csv(s.surfaces).is_ok());
+        assert!(parse_point_csv(s.points_rgb, 1e-3).is_ok());
+    }
 }

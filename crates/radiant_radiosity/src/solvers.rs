@@ -55,13 +55,19 @@ impl SolverKind {
         }
     }
 
-    /// Parses a CLI name.
+    /// Other names each solver is known by.
+    pub const ALIASES: &[(&str, SolverKind)] = &[
+        ("progressive", Self::Southwell),
+        ("shooting", Self::Southwell),
+        ("gs", Self::GaussSeidel),
+        ("gauss_seidel", Self::GaussSeidel),
+        ("gaussseidel", Self::GaussSeidel),
+    ];
+
+    /// Parses a CLI name or an alias.
     pub fn parse(s: &str) -> Option<Self> {
-        match s {
-            "progressive" | "shooting" => Some(Self::Southwell),
-            "gs" | "gauss_seidel" | "gaussseidel" => Some(Self::GaussSeidel),
-            _ => Self::ALL.into_iter().find(|k| k.name() == s),
-        }
+        (Self::ALL.into_iter().find(|k| k.name() == s))
+            .or_else(|| Self::ALIASES.iter().find(|(a, _)| *a == s).map(|&(_, k)| k))
     }
 }
 

@@ -29,6 +29,47 @@ pub const CORNELL_BOX_GLTF: &str = include_str!("../../../assets/cornell_box.glt
 /// Names accepted by [`builtin`].
 pub const BUILTIN_NAMES: &[&str] = &["cornell-box"];
 
+/// The builtin scenes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Builtin {
+    /// The Cornell box, from the Cornell measurements (`assets/cornell_box.gltf`).
+    CornellBox,
+}
+
+impl Builtin {
+    /// Every builtin scene.
+    pub const ALL: [Builtin; 1] = [Builtin::CornellBox];
+    /// Other names each is known by.
+    pub const ALIASES: &[(&str, Builtin)] = &[
+        ("cornell_box", Builtin::CornellBox),
+        ("cornell", Builtin::CornellBox),
+    ];
+
+    /// Its name (as `--builtin` takes it).
+    pub fn name(self) -> &'static str {
+        match self {
+            Builtin::CornellBox => "cornell-box",
+        }
+    }
+
+    /// The builtin scene of a name or an alias.
+    pub fn parse(name: &str) -> Option<Builtin> {
+        (Self::ALL.into_iter().find(|b| b.name() == name)).or_else(|| {
+            Self::ALIASES
+                .iter()
+                .find(|(a, _)| *a == name)
+                .map(|&(_, b)| b)
+        })
+    }
+
+    /// Loads it.
+    pub fn scene(self) -> Result<Scene, SceneError> {
+        match self {
+            Builtin::CornellBox => load_gltf_slice(CORNELL_BOX_GLTF.as_bytes()),
+        }
+    }
+}
+
 /// Errors from loading a scene. Each names the offending part.
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
@@ -450,10 +491,9 @@ impl Scene {
 
 /// Loads a builtin scene by name (see [`BUILTIN_NAMES`]).
 pub fn builtin(name: &str) -> Result<Scene, SceneError> {
-    match name {
-        "cornell-box" | "cornell_box" | "cornell" => load_gltf_slice(CORNELL_BOX_GLTF.as_bytes()),
-        other => Err(SceneError::UnknownBuiltin(other.to_string())),
-    }
+    Builtin::parse(name)
+        .ok_or_else(|| SceneError::UnknownBuiltin(name.to_string()))?
+        .scene()
 }
 
 #[cfg(test)]

@@ -54,13 +54,16 @@ impl FormFactorKind {
         }
     }
 
-    /// Parses a CLI name.
+    /// Other names each method is known by.
+    pub const ALIASES: &[(&str, FormFactorKind)] = &[
+        ("ray-cast", Self::RayCast),
+        ("monte-carlo", Self::MonteCarlo),
+    ];
+
+    /// Parses a CLI name or an alias.
     pub fn parse(s: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|k| {
-            k.name() == s
-                || (s == "ray-cast" && *k == Self::RayCast)
-                || (s == "monte-carlo" && *k == Self::MonteCarlo)
-        })
+        (Self::ALL.into_iter().find(|k| k.name() == s))
+            .or_else(|| Self::ALIASES.iter().find(|(a, _)| *a == s).map(|&(_, k)| k))
     }
 }
 
