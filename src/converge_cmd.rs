@@ -48,8 +48,6 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
     };
     ensure_dir(&args.out)?;
     let file_ref = choose_reference(args, &scene)?;
-    // With `--reference direct`, the direct solve on the same mesh is the reference.
-    let use_direct = file_ref.is_none();
     let reference_name = file_ref.as_ref().map_or(
         "direct solve on the same mesh (solver error)".to_string(),
         |(n, _)| n.clone(),
@@ -68,119 +66,19 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
         "method,form_factors,t_s,iterations,rel_rms_error,max_rel_error,residual,mean_rel_error\n",
     );
     let mut curves = Vec::new();
-    let mut summary = Vec::new();
     for &ff in &ffs {
         for &solver in &solvers {
             let label = format!("{} / {}", solver.name(), ff.name());
-            let mut params = args.solve.params(solver, ff)?;
-            params.time_limit = Some(crate::common::seconds(time_limit)?);
-            let pb = progress_bar(1, &label);
-            let mut bake = match Bake::with_progress(&scene, &params, &|d, n| {
-                pb.set_length(n as u64);
-                pb.set_position(d as u64);
-            }) {
-                Ok(b) => b,
-                Err(e) => {
-                    pb.finish_and_clear();
-                    println!("{label}: skipped: {e}");
-                    continue;
-                }
-            };
-            // Time spent measuring the error is not the method's: subtract it.
-            let mut overhead = Duration::ZERO;
-            let direct_ref: Option<Vec<Rgb>> = if use_direct {
-                let t = Instant::now();
-                let mut d = Direct::new(params.solver_params);
-                match d.step(&bake.system, Duration::ZERO) {
-                    Ok(_) => {}
-                    Err(e @ SolveError::OutOfMemory { .. }) => {
-                        pb.finish_and_clear();
-                        println!("{label}: skipped: the direct reference needs it: {e}");
-                        continue;
-                    }
-                    Err(e) => return Err(e.into()),
-                }
-                overhead += t.elapsed();
-                Some(d.radiosity(&bake.system))
-            } else {
-                None
-            };
-            // The time limit is the solver's: form factors always finish first.
-            let prepared = bake.elapsed() - overhead.as_secs_f64();
-            let mut rows = Vec::new();
-            let mut last = None;
-            loop {
-                let p = match bake.step(crate::common::seconds(args.sample_every)?) {
-                    Ok(p) => p,
-                    Err(e) => {
-                        println!("{label}: stopped: {e}");
-                        break;
-                    }
-                };
-                let t = Instant::now();
-                let b = bake.radiosity();
-                let error = match (&direct_ref, &file_ref) {
-                    (Some(r), _) => metrics::compare_elements(&bake.system.area, &b, r),
-                    (None, Some((_, rows))) => metrics::compare_surfaces(
-                        &metrics::surface_means(&bake.surfaces, &bake.mesh, &b),
-                        rows,
-                    )?,
-                    (None, None) => unreachable_reference()?,
-                };
-                overhead += t.elapsed();
-                let t_s = bake.elapsed() - overhead.as_secs_f64();
-                rows.push(Row {
-                    t_s,
-                    iterations: p.iterations,
-                    error,
-                    residual: p.residual,
-                });
-                pb.set_message(format!("{label}: {:.2} %", error.mean_rel * 100.0));
-                last = Some((p, error, t_s));
-                if p.converged || t_s - prepared >= time_limit || !p.residual.is_finite() {
-                    break;
-                }
+            if let Some(rows) = curve(
+                args,
+                &scene,
+                (solver, ff),
+                &label,
+                file_ref.as_ref(),
+                time_limit,
+            )? {
+                record((solver, ff), label, &rows, &mut csv, &mut curves);
             }
-            pb.finish_and_clear();
-            for r in &rows {
-                let _ = writeln!(
-                    csv,
-                    "{},{},{:.6},{},{:.6e},{:.6e},{:.6e},{:.6e}",
-                    solver.name(),
-                    ff.name(),
-                    r.t_s,
-                    r.iterations,
-                    r.error.rel_rms,
-                    r.error.max_rel,
-                    r.residual,
-                    r.error.mean_rel
-                );
-            }
-            // Time to 1 % mean error, if reached.
-            let to_1pct = rows
-                .iter()
-                .find(|r| r.error.mean_rel <= 0.01)
-                .map(|r| r.t_s);
-            if let Some((p, e, t)) = last {
-                let line = format!(
-                    "{label:28} {:>8.3} s  mean {:6.3} %  max {:6.3} %  rms {:6.3} %  residual {:.1e}  1 % at {}",
-                    t,
-                    e.mean_rel * 100.0,
-                    e.max_rel * 100.0,
-                    e.rel_rms * 100.0,
-                    p.residual,
-                    to_1pct.map_or("never".to_string(), |t| format!("{t:.3} s"))
-                );
-                println!("{line}");
-                summary.push(line);
-            }
-            if rows.is_empty() {
-                continue;
-            }
-            curves.push(Curve {
-                label,
-                points: rows.iter().map(|r| (r.t_s, r.error.mean_rel)).collect(),
-            });
         }
     }
     #[cfg(feature = "render")]
@@ -199,6 +97,132 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
         args.out.display()
     );
     Ok(())
+}
+
+/// Adds one combination's rows to `convergence.csv`, prints its summary and keeps its curve.
+fn record(
+    (solver, ff): (SolverKind, FormFactorKind),
+    label: String,
+    rows: &[Row],
+    csv: &mut String,
+    curves: &mut Vec<Curve>,
+) {
+    for r in rows {
+        let _ = writeln!(
+            csv,
+            "{},{},{:.6},{},{:.6e},{:.6e},{:.6e},{:.6e}",
+            solver.name(),
+            ff.name(),
+            r.t_s,
+            r.iterations,
+            r.error.rel_rms,
+            r.error.max_rel,
+            r.residual,
+            r.error.mean_rel
+        );
+    }
+    let Some(last) = rows.last() else {
+        return;
+    };
+    // Time to 1 % mean error, if reached.
+    let to_1pct = (rows.iter().find(|r| r.error.mean_rel <= 0.01)).map(|r| r.t_s);
+    println!(
+        "{label:28} {:>8.3} s  mean {:6.3} %  max {:6.3} %  rms {:6.3} %  residual {:.1e}  1 % at {}",
+        last.t_s,
+        last.error.mean_rel * 100.0,
+        last.error.max_rel * 100.0,
+        last.error.rel_rms * 100.0,
+        last.residual,
+        to_1pct.map_or("never".to_string(), |t| format!("{t:.3} s"))
+    );
+    curves.push(Curve {
+        label,
+        points: rows.iter().map(|r| (r.t_s, r.error.mean_rel)).collect(),
+    });
+}
+
+/// One solver × form-factor curve: the error after each step of about `--sample-every`
+/// seconds, against the per-surface reference or (with none) the direct solve on the same
+/// mesh, until converged or the time limit. `None`: the combination cannot run here (it says
+/// why). The time spent measuring the error is not the method's: it is subtracted.
+fn curve(
+    args: &ConvergeArgs,
+    scene: &radiant::scene::Scene,
+    (solver, ff): (SolverKind, FormFactorKind),
+    label: &str,
+    file_ref: Option<&NamedReference>,
+    time_limit: f64,
+) -> anyhow::Result<Option<Vec<Row>>> {
+    let mut params = args.solve.params(solver, ff)?;
+    params.time_limit = Some(crate::common::seconds(time_limit)?);
+    let pb = progress_bar(1, label);
+    let mut bake = match Bake::with_progress(scene, &params, &|d, n| {
+        pb.set_length(n as u64);
+        pb.set_position(d as u64);
+    }) {
+        Ok(b) => b,
+        Err(e) => {
+            pb.finish_and_clear();
+            println!("{label}: skipped: {e}");
+            return Ok(None);
+        }
+    };
+    let mut overhead = Duration::ZERO;
+    // With `--reference direct`, the direct solve on the same mesh is the reference.
+    let direct_ref: Option<Vec<Rgb>> = match file_ref {
+        Some(_) => None,
+        None => {
+            let t = Instant::now();
+            let mut d = Direct::new(params.solver_params);
+            match d.step(&bake.system, Duration::ZERO) {
+                Ok(_) => {}
+                Err(e @ SolveError::OutOfMemory { .. }) => {
+                    pb.finish_and_clear();
+                    println!("{label}: skipped: the direct reference needs it: {e}");
+                    return Ok(None);
+                }
+                Err(e) => return Err(e.into()),
+            }
+            overhead += t.elapsed();
+            Some(d.radiosity(&bake.system))
+        }
+    };
+    // The time limit is the solver's: form factors always finish first.
+    let prepared = bake.elapsed() - overhead.as_secs_f64();
+    let mut rows = Vec::new();
+    loop {
+        let p = match bake.step(crate::common::seconds(args.sample_every)?) {
+            Ok(p) => p,
+            Err(e) => {
+                println!("{label}: stopped: {e}");
+                break;
+            }
+        };
+        let t = Instant::now();
+        let b = bake.radiosity();
+        let error = match (&direct_ref, file_ref) {
+            (Some(r), _) => metrics::compare_elements(&bake.system.area, &b, r),
+            (None, Some((_, rows))) => metrics::compare_surfaces(
+                &metrics::surface_means(&bake.surfaces, &bake.mesh, &b),
+                rows,
+            )?,
+            (None, None) => unreachable_reference()?,
+        };
+        overhead += t.elapsed();
+        let t_s = bake.elapsed() - overhead.as_secs_f64();
+        rows.push(Row {
+            t_s,
+            iterations: p.iterations,
+            error,
+            residual: p.residual,
+        });
+        pb.set_message(format!("{label}: {:.2} %", error.mean_rel * 100.0));
+        if p.converged || t_s - prepared >= time_limit || !p.residual.is_finite() {
+            break;
+        }
+    }
+    pb.finish_and_clear();
+    Ok(Some(rows))
 }
 
 /// The GPU hemicube gather's curve (`gpu-hemicube` in `--methods`): its error after each sweep

@@ -116,55 +116,37 @@ fn settings(args: &RenderArgs) -> anyhow::Result<FrameSettings> {
     Ok(s)
 }
 
-pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
-    let (w, h) = parse_size(&args.size)?;
-    let frame_settings = settings(args)?;
-    args.solve.init_threads()?;
-    let params = args.solve.params(args.method.0, args.form_factors.0)?;
-    let (scene, source) = load_scene(&args.scene)?;
-    ensure_dir(&args.out)?;
-    let start = Instant::now();
-
+/// Bakes the scene as `bake` would (no bake when nothing emits).
+fn bake(
+    args: &RenderArgs,
+    scene: &radiant::scene::Scene,
+    params: &BakeParams,
+    source: &str,
+) -> anyhow::Result<Option<radiant::radiosity::BakeResult>> {
     // No emitters: nothing to bake, and nothing is allocated for it.
-    let bake = if scene.has_emitters() {
+    if scene.has_emitters() {
         let h = &args.hierarchy;
-        let clustered = baking::use_clustered(h.hierarchy, false, &scene, &params)?;
+        let clustered = baking::use_clustered(h.hierarchy, false, scene, params)?;
         let checkpoint = args.checkpoint.as_deref();
-        Some(if clustered {
-            baking::bake_clustered(&scene, &params, h, checkpoint)?
+        Ok(Some(if clustered {
+            baking::bake_clustered(scene, params, h, checkpoint)?
         } else {
-            baking::bake_triangles(&scene, &params, checkpoint)?
-        })
+            baking::bake_triangles(scene, params, checkpoint)?
+        }))
     } else {
         println!("{source}: no emitters, so no bake; the frame shows punctual lights and emission");
-        None
-    };
-    let bake_s = start.elapsed().as_secs_f64();
-    let render_scene = radiant::bridge::render_scene(&scene, bake.as_ref(), args.texel_density)?;
+        Ok(None)
+    }
+}
 
-    let gpu = GpuContext::headless()?;
-    let mut frame = FrameRenderer::new(&gpu, &render_scene)?;
-    let t = Instant::now();
-    let png = frame.capture(&gpu, w, h, &frame_settings)?;
-    let frame_ms = t.elapsed().as_secs_f64() * 1e3;
-    let graph = frame.report().cloned();
-    let exr_settings = if args.exr_effects {
-        frame_settings
-    } else {
-        FrameSettings {
-            ssao: None,
-            bloom: None,
-            ..frame_settings
-        }
-    };
-    let exr = if exr_settings == frame_settings {
-        png.hdr.clone()
-    } else {
-        frame.capture(&gpu, w, h, &exr_settings)?.hdr
-    };
-    write_png(&args.out.join("frame.png"), &png.ldr)?;
-    write_exr(&args.out.join("frame.exr"), &exr)?;
-
+/// The frame against a path-traced image from the same camera (`--reference-image`, or the
+/// one shipped with the builtin Cornell box): radiance, no SSAO, no bloom; the whole image and
+/// the surfaces alone. Null when there is no reference.
+fn against_reference(
+    args: &RenderArgs,
+    gpu: &GpuContext,
+    frame: &mut FrameRenderer,
+) -> anyhow::Result<serde_json::Value> {
     // Error against a path tracer from the same camera: radiance, no SSAO, no bloom.
     let reference = match (&args.reference_image, args.scene.builtin) {
         (Some(p), _) => Some(std::fs::read(p).with_context(|| format!("{}", p.display()))?),
@@ -173,8 +155,10 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         }
         _ => None,
     };
-    let mut against = serde_json::Value::Null;
-    if let Some(bytes) = reference {
+    let Some(bytes) = reference else {
+        return Ok(serde_json::Value::Null);
+    };
+    {
         let reference = radiant::render::capture::read_image(&bytes)?;
         let plain = FrameSettings {
             debug_view: DebugView::Lit,
@@ -183,14 +167,14 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         // 4×4 supersampled and box-filtered, like the path tracer's pixels.
         const SS: u32 = 4;
         let ours = frame
-            .capture(&gpu, reference.width * SS, reference.height * SS, &plain)?
+            .capture(gpu, reference.width * SS, reference.height * SS, &plain)?
             .hdr
             .box_downsample(SS);
         // Emitter pixels (and their neighbours) separately: their edges decide most of the
         // difference, and the surfaces are what the bake is about.
         let emissive = frame
             .capture(
-                &gpu,
+                gpu,
                 reference.width * SS,
                 reference.height * SS,
                 &FrameSettings {
@@ -222,34 +206,53 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         let all = radiant::render::capture::compare_images(&ours, &reference, 4);
         let surfaces = radiant::render::capture::compare_images(&mask(&ours), &mask(&reference), 4);
         if let (Some(e), Some(s)) = (all, surfaces) {
-            println!(
-                "against the path-traced reference ({}×{}, same camera, 16 samples per pixel):",
-                reference.width, reference.height
-            );
-            println!(
-                "  whole image: L1 {:.2} % per pixel, {:.2} % over 4×4 blocks, mean bias {:+.2} %",
-                100.0 * e.rel_l1,
-                100.0 * e.rel_l1_blocks,
-                100.0 * e.mean_bias
-            );
-            println!(
-                "  surfaces (emitter pixels excluded): L1 {:.2} %, {:.2} % over 4×4 blocks, mean bias {:+.2} %",
-                100.0 * s.rel_l1,
-                100.0 * s.rel_l1_blocks,
-                100.0 * s.mean_bias
-            );
-            let j = |e: radiant::render::capture::ImageError| json!({"rel_l1": e.rel_l1, "rel_l1_4x4": e.rel_l1_blocks, "mean_bias": e.mean_bias});
-            against = json!({
-                "size": [reference.width, reference.height],
-                "supersampling": SS * SS,
-                "whole_image": j(e),
-                "surfaces": j(s),
-            });
+            return Ok(describe(e, s, &reference, SS));
         }
     }
+    Ok(serde_json::Value::Null)
+}
 
-    let mut timings = serde_json::Value::Null;
-    if args.timings > 0 {
+/// Prints the two errors against the reference and returns them for `render.json`.
+fn describe(
+    e: radiant::render::capture::ImageError,
+    s: radiant::render::capture::ImageError,
+    reference: &radiant::render::capture::Image,
+    ss: u32,
+) -> serde_json::Value {
+    println!(
+        "against the path-traced reference ({}×{}, same camera, 16 samples per pixel):",
+        reference.width, reference.height
+    );
+    println!(
+        "  whole image: L1 {:.2} % per pixel, {:.2} % over 4×4 blocks, mean bias {:+.2} %",
+        100.0 * e.rel_l1,
+        100.0 * e.rel_l1_blocks,
+        100.0 * e.mean_bias
+    );
+    println!(
+        "  surfaces (emitter pixels excluded): L1 {:.2} %, {:.2} % over 4×4 blocks, mean bias {:+.2} %",
+        100.0 * s.rel_l1,
+        100.0 * s.rel_l1_blocks,
+        100.0 * s.mean_bias
+    );
+    let j = |e: radiant::render::capture::ImageError| json!({"rel_l1": e.rel_l1, "rel_l1_4x4": e.rel_l1_blocks, "mean_bias": e.mean_bias});
+    json!({
+        "size": [reference.width, reference.height],
+        "supersampling": ss * ss,
+        "whole_image": j(e),
+        "surfaces": j(s),
+    })
+}
+
+/// `--timings`: each pass's median time over `frames` frames.
+fn pass_timings(
+    gpu: &GpuContext,
+    frame: &mut FrameRenderer,
+    (w, h): (u32, u32),
+    frame_settings: &FrameSettings,
+    frames: usize,
+) -> anyhow::Result<serde_json::Value> {
+    {
         let target = radiant::render::util::target_texture(
             &gpu.device,
             "timing_target",
@@ -260,14 +263,14 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         let view = target.create_view(&Default::default());
         let mut runs = Vec::new();
         let mut gpu_clock = false;
-        for _ in 0..args.timings {
+        for _ in 0..frames {
             let t = frame.render_timed(
-                &gpu,
+                gpu,
                 &view,
                 w,
                 h,
                 radiant::render::wgpu::TextureFormat::Rgba8UnormSrgb,
-                &frame_settings,
+                frame_settings,
             )?;
             gpu_clock = t.gpu;
             runs.push(t.passes);
@@ -283,7 +286,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             .collect();
         println!(
             "per-pass times, median of {} frames ({}):",
-            args.timings,
+            frames,
             if gpu_clock {
                 "GPU timestamps"
             } else {
@@ -298,12 +301,55 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             "total",
             medians.iter().map(|m| m.1).sum::<f64>()
         );
-        timings = json!({
-            "frames": args.timings,
+        Ok(json!({
+            "frames": frames,
             "clock": if gpu_clock { "gpu" } else { "cpu" },
             "median_ms": medians.iter().map(|(n, ms)| json!({"pass": n, "ms": ms})).collect::<Vec<_>>(),
-        });
+        }))
     }
+}
+
+pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
+    let (w, h) = parse_size(&args.size)?;
+    let frame_settings = settings(args)?;
+    args.solve.init_threads()?;
+    let params = args.solve.params(args.method.0, args.form_factors.0)?;
+    let (scene, source) = load_scene(&args.scene)?;
+    ensure_dir(&args.out)?;
+    let start = Instant::now();
+
+    let bake = bake(args, &scene, &params, &source)?;
+    let bake_s = start.elapsed().as_secs_f64();
+    let render_scene = radiant::bridge::render_scene(&scene, bake.as_ref(), args.texel_density)?;
+
+    let gpu = GpuContext::headless()?;
+    let mut frame = FrameRenderer::new(&gpu, &render_scene)?;
+    let t = Instant::now();
+    let png = frame.capture(&gpu, w, h, &frame_settings)?;
+    let frame_ms = t.elapsed().as_secs_f64() * 1e3;
+    let graph = frame.report().cloned();
+    let exr_settings = if args.exr_effects {
+        frame_settings
+    } else {
+        FrameSettings {
+            ssao: None,
+            bloom: None,
+            ..frame_settings
+        }
+    };
+    let exr = if exr_settings == frame_settings {
+        png.hdr.clone()
+    } else {
+        frame.capture(&gpu, w, h, &exr_settings)?.hdr
+    };
+    write_png(&args.out.join("frame.png"), &png.ldr)?;
+    write_exr(&args.out.join("frame.exr"), &exr)?;
+
+    let against = against_reference(args, &gpu, &mut frame)?;
+    let timings = match args.timings {
+        0 => serde_json::Value::Null,
+        n => pass_timings(&gpu, &mut frame, (w, h), &frame_settings, n)?,
+    };
 
     let report = json!({
         "scene": source,
