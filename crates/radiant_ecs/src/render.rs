@@ -22,24 +22,16 @@ use crate::app::{App, Plugin, PostUpdate};
 use crate::bake::{BakeSystems, BakedLighting};
 use crate::scene::{SceneCamera, gather_render_scene};
 
-/// Bloom on the camera (see `radiant_post::bloom::Bloom` for the fields).
-#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
-pub struct Bloom(pub radiant_post::bloom::Bloom);
-/// SSAO on the camera (see `radiant_render::ssao::Ssao`).
-#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
-pub struct Ssao(pub radiant_render::ssao::Ssao);
-/// Sobel edges on the camera (see `radiant_post::sobel::Sobel`).
-#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
-pub struct Sobel(pub radiant_post::sobel::Sobel);
-/// Gaussian blur on the camera (see `radiant_post::blur::GaussianBlur`).
-#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
-pub struct GaussianBlur(pub radiant_post::blur::GaussianBlur);
-/// Exposure and operator (default when absent: ACES at 0 EV).
-#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
-pub struct Tonemapping(pub radiant_post::tonemapping::Tonemapping);
-/// What the lighting pass shows (default when absent: the lit image).
-#[derive(Component, Clone, Copy, Debug, Default, PartialEq)]
-pub struct DebugView(pub radiant_render::lighting::DebugView);
+// The effect settings are the components (feature `bevy_ecs` of `radiant_post` and
+// `radiant_render`, as Bevy derives `Component` on its own settings): on the camera entity,
+// present → the effect's passes run; absent → they are culled. Tone mapping and the debug view
+// default to ACES at 0 EV and the lit image when absent.
+pub use radiant_post::bloom::Bloom;
+pub use radiant_post::blur::GaussianBlur;
+pub use radiant_post::sobel::Sobel;
+pub use radiant_post::tonemapping::Tonemapping;
+pub use radiant_render::lighting::DebugView;
+pub use radiant_render::ssao::Ssao;
 
 /// Renderer settings.
 #[derive(Resource, Clone, Copy, Debug, PartialEq)]
@@ -243,12 +235,12 @@ pub fn extract_settings(world: &mut World) -> FrameSettings {
         return FrameSettings::MINIMAL;
     };
     FrameSettings {
-        tonemapping: tm.map(|t| t.0).unwrap_or_default(),
-        bloom: bloom.map(|b| b.0),
-        ssao: ssao.map(|s| s.0),
-        sobel: sobel.map(|s| s.0),
-        blur: blur.map(|b| b.0),
-        debug_view: view.map(|v| v.0).unwrap_or_default(),
+        tonemapping: tm.copied().unwrap_or_default(),
+        bloom: bloom.copied(),
+        ssao: ssao.copied(),
+        sobel: sobel.copied(),
+        blur: blur.copied(),
+        debug_view: view.copied().unwrap_or_default(),
     }
 }
 

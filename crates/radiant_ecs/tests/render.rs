@@ -97,9 +97,7 @@ fn the_baked_light_reaches_the_frame() {
             / img.texels.len() as f64
     };
     let cam = camera(&mut app);
-    app.world
-        .entity_mut(cam)
-        .insert(DebugView(radiant_render::lighting::DebugView::LightMap));
+    app.world.entity_mut(cam).insert(DebugView::LightMap);
     // The first frame starts the bake; nothing is published yet, so the light map is black.
     app.update();
     let before = mean(&app);

@@ -300,34 +300,12 @@ fn camera_entity(world: &mut World) -> Option<Entity> {
     q.iter(world).next()
 }
 
-/// An effect component on the camera and the settings it wraps.
-trait EffectComponent: Component<Mutability = bevy_ecs::component::Mutable> + Copy + Default {
-    type Settings: Inspect + Copy + PartialEq;
-    fn settings(&self) -> Self::Settings;
-    fn wrap(settings: Self::Settings) -> Self;
-}
-
-macro_rules! effect_component {
-    ($component:ident, $settings:ty) => {
-        impl EffectComponent for $component {
-            type Settings = $settings;
-            fn settings(&self) -> $settings {
-                self.0
-            }
-            fn wrap(settings: $settings) -> Self {
-                Self(settings)
-            }
-        }
-    };
-}
-effect_component!(Bloom, radiant_post::bloom::Bloom);
-effect_component!(Ssao, radiant_render::ssao::Ssao);
-effect_component!(Sobel, radiant_post::sobel::Sobel);
-effect_component!(GaussianBlur, radiant_post::blur::GaussianBlur);
-
 /// One optional effect: a toggle that inserts or removes its component (the render graph
 /// recompiles without its passes and textures), and its settings when on.
-fn effect<C: EffectComponent>(ui: &mut Ui, world: &mut World, camera: Entity, name: &str) {
+fn effect<C>(ui: &mut Ui, world: &mut World, camera: Entity, name: &str)
+where
+    C: Component<Mutability = bevy_ecs::component::Mutable> + Inspect + Copy + Default + PartialEq,
+{
     let current = world.get::<C>(camera).copied();
     let mut on = current.is_some();
     if ui.checkbox(&mut on, RichText::new(name).strong()).changed() {
@@ -338,15 +316,14 @@ fn effect<C: EffectComponent>(ui: &mut Ui, world: &mut World, camera: Entity, na
         }
         return;
     }
-    if let Some(c) = current {
-        let before = c.settings();
+    if let Some(before) = current {
         let mut settings = before;
         ui.indent(name, |ui| {
             if settings.inspect(ui)
                 && settings != before
                 && let Some(mut slot) = world.get_mut::<C>(camera)
             {
-                *slot = C::wrap(settings);
+                *slot = settings;
             }
         });
     }
@@ -364,11 +341,11 @@ pub fn post_panel(ui: &mut Ui, world: &mut World, _state: &mut InspectorState) {
         .get::<Tonemapping>(camera)
         .copied()
         .unwrap_or_default();
-    if tm.0.inspect(ui) {
+    if tm.inspect(ui) {
         world.entity_mut(camera).insert(tm);
     }
     let mut view = world.get::<DebugView>(camera).copied().unwrap_or_default();
-    if view.0.inspect(ui) {
+    if view.inspect(ui) {
         world.entity_mut(camera).insert(view);
     }
     ui.separator();

@@ -262,7 +262,6 @@ fn post_panel_slider_and_toggles_write_components() {
         .world
         .get::<Tonemapping>(cam)
         .expect("tm")
-        .0
         .exposure;
     drag_slider(&mut h, "exposure (EV)", 60.0);
     let ev1 = h
@@ -270,7 +269,6 @@ fn post_panel_slider_and_toggles_write_components() {
         .world
         .get::<Tonemapping>(cam)
         .expect("tm")
-        .0
         .exposure;
     assert!(ev1 > ev0 + 0.1, "exposure {ev0} → {ev1}");
 

@@ -46,6 +46,7 @@ pub enum BloomComposite {
 
 /// Bloom. Present → on; absent → its passes and textures are culled.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "bevy_ecs", derive(bevy_ecs::component::Component))]
 pub struct Bloom {
     /// Mip chain or the lecture's Gaussian (default: mip chain).
     pub method: BloomMethod,
@@ -69,20 +70,23 @@ pub struct Bloom {
 
 impl Default for Bloom {
     fn default() -> Self {
-        Self {
-            method: BloomMethod::MipChain,
-            composite: BloomComposite::EnergyConserving,
-            intensity: 0.15,
-            threshold: 1.0,
-            knee: 0.5,
-            mip_count: 6,
-            scatter: 0.7,
-            gaussian_rounds: 3,
-        }
+        Self::NATURAL
     }
 }
 
 impl Bloom {
+    /// The default: Jimenez's mip chain, energy-conserving, a soft knee at 1.
+    pub const NATURAL: Bloom = Bloom {
+        method: BloomMethod::MipChain,
+        composite: BloomComposite::EnergyConserving,
+        intensity: 0.15,
+        threshold: 1.0,
+        knee: 0.5,
+        mip_count: 6,
+        scatter: 0.7,
+        gaussian_rounds: 3,
+    };
+
     /// The lecture's version: bright pass, repeated 9-tap Gaussian, additive.
     pub const LECTURE: Bloom = Bloom {
         method: BloomMethod::Gaussian,

@@ -19,6 +19,7 @@ pub const MAX_TAPS: u32 = 63;
 
 /// A separable Gaussian blur of the final image. Present → on.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "bevy_ecs", derive(bevy_ecs::component::Component))]
 pub struct GaussianBlur {
     /// Standard deviation in pixels; range (0, 32] (default: 2).
     pub sigma: f32,

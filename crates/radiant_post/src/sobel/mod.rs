@@ -28,6 +28,7 @@ pub enum EdgeSource {
 
 /// Sobel edge overlay. Present → on.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "bevy_ecs", derive(bevy_ecs::component::Component))]
 pub struct Sobel {
     /// Gradient magnitude above which a pixel is an edge; a unit step has magnitude 1; range
     /// (0, ∞) (default: 0.2).

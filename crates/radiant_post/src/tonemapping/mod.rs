@@ -17,6 +17,7 @@ pub fn shader_source() -> String {
 
 /// Tone mapping: always on (the target is 8-bit); `Tonemap::Clamp` is "none".
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "bevy_ecs", derive(bevy_ecs::component::Component))]
 pub struct Tonemapping {
     /// The operator (default: ACES fitted).
     pub operator: Tonemap,

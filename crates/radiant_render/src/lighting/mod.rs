@@ -18,6 +18,7 @@ pub fn shader_source() -> String {
 
 /// What the lighting pass writes: the lit image, or one input on its own.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "bevy_ecs", derive(bevy_ecs::component::Component))]
 pub enum DebugView {
     /// The lit image (default).
     #[default]

@@ -28,6 +28,7 @@ pub fn blur_shader_source() -> String {
 /// Screen-space ambient occlusion. Present → the passes run; absent → they are culled and the
 /// lighting reads no AO.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "bevy_ecs", derive(bevy_ecs::component::Component))]
 pub struct Ssao {
     /// Radius of the sampling hemisphere, in metres of view space; range (0, ∞)
     /// (default: 0.1, a fifth of the Cornell box's wall).
