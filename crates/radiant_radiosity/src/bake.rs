@@ -167,9 +167,7 @@ impl Bake {
             && mesh.element_count() > 0
         {
             // Written when nothing emitted, so it has no links to resume from.
-            return Err(BakeError::Checkpoint(
-                "it was written when nothing emitted and holds no links".into(),
-            ));
+            return Err(crate::checkpoint::CheckpointError::NoLinks.into());
         }
         let resumed = saved.is_some();
         let (hierarchy, links, saved_b) = match saved {

@@ -31,6 +31,72 @@ use crate::rng::Fnv;
 use crate::system::Rgb;
 
 /// The magic, without its last byte: the version.
+/// Why a checkpoint cannot be written or used: the failure domain of checkpoints, apart from
+/// the bake's ([`BakeError::Checkpoint`] carries it).
+#[derive(Debug, thiserror::Error)]
+pub enum CheckpointError {
+    /// Reading or writing the file failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// What the system said.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The file does not start with a checkpoint's magic and a known version.
+    #[error("{path}: not a Radiant bake checkpoint (or another version)")]
+    NotACheckpoint {
+        /// The file.
+        path: String,
+    },
+    /// The checksum does not match the contents.
+    #[error("{path}: checksum mismatch: the file is damaged")]
+    Damaged {
+        /// The file.
+        path: String,
+    },
+    /// The sizes in the header do not match the file's length, or the contents are
+    /// inconsistent (rows out of order, sources outside the mesh, non-finite values).
+    #[error("{path}: {what}")]
+    Corrupt {
+        /// The file.
+        path: String,
+        /// What does not hold.
+        what: &'static str,
+    },
+    /// Written for other geometry or link parameters.
+    #[error(
+        "it was written for other geometry or bake parameters (fingerprint {found:016x}, this bake {expected:016x})"
+    )]
+    OtherScene {
+        /// This bake's fingerprint.
+        expected: u64,
+        /// The file's.
+        found: u64,
+    },
+    /// Its element hierarchy is not this mesh's.
+    #[error(
+        "its element hierarchy differs from this scene's ({found_elements} elements, {found_nodes} nodes; this scene {elements}, {nodes})"
+    )]
+    OtherMesh {
+        /// This scene's elements.
+        elements: usize,
+        /// This scene's nodes.
+        nodes: usize,
+        /// The file's elements.
+        found_elements: usize,
+        /// The file's nodes.
+        found_nodes: usize,
+    },
+    /// Written when nothing emitted: it holds no links to resume from.
+    #[error("it was written when nothing emitted and holds no links")]
+    NoLinks,
+    /// A finished clustered result has no links to write (write from the `ClusterBake`).
+    #[error("bakes of the clustered hierarchy have no checkpoints yet: use --hierarchy triangles")]
+    ClusteredResult,
+}
+
 const MAGIC: &[u8; 15] = b"RADIANT-BAKE\0\0\0";
 const VERSION: u8 = 2;
 /// The version of clustered checkpoints.
@@ -52,9 +118,11 @@ impl Saved {
     /// Refuses a checkpoint written for other geometry or link parameters.
     pub fn fits_scene(&self, fingerprint: u64) -> Result<(), BakeError> {
         if self.hierarchy.fingerprint != fingerprint {
-            return Err(BakeError::Checkpoint(
-                "it was written for other geometry or bake parameters".into(),
-            ));
+            return Err(CheckpointError::OtherScene {
+                expected: fingerprint,
+                found: self.hierarchy.fingerprint,
+            }
+            .into());
         }
         Ok(())
     }
@@ -62,9 +130,13 @@ impl Saved {
     /// Refuses a checkpoint whose element hierarchy is not `mesh`'s.
     pub fn fits_mesh(&self, mesh: &Mesh) -> Result<(), BakeError> {
         if self.hierarchy.dead.len() != mesh.element_count() || self.nodes != mesh.nodes.len() {
-            return Err(BakeError::Checkpoint(
-                "its element hierarchy differs from this scene's".into(),
-            ));
+            return Err(CheckpointError::OtherMesh {
+                elements: mesh.element_count(),
+                nodes: mesh.nodes.len(),
+                found_elements: self.hierarchy.dead.len(),
+                found_nodes: self.nodes,
+            }
+            .into());
         }
         Ok(())
     }
@@ -159,7 +231,7 @@ impl Cursor<'_> {
 /// Reads and checks a checkpoint. Every size is checked against the file length before
 /// anything is allocated, so a corrupt file is an error, not a crash.
 pub fn read(path: &Path) -> Result<Saved, BakeError> {
-    let bad = |what: &str| BakeError::Checkpoint(format!("{}: {what}", path.display()));
+    let bad = |what: &'static str| corrupt(path, what);
     let (data, version) = open(path, false, 32)?;
     let body = &data[..data.len() - 8];
     let mut c = Cursor { data: body, at: 16 };
@@ -253,23 +325,31 @@ pub fn read(path: &Path) -> Result<Saved, BakeError> {
 /// `header` bytes after the magic, and checks its checksum; returns the bytes and the version.
 /// The other hierarchy's file is [`BakeError::CheckpointHierarchy`].
 fn open(path: &Path, clustered: bool, header: usize) -> Result<(Vec<u8>, u8), BakeError> {
-    let bad = |what: &str| BakeError::Checkpoint(format!("{}: {what}", path.display()));
-    let data = std::fs::read(path).map_err(|e| bad(&e.to_string()))?;
+    let at = || path.display().to_string();
+    let data = std::fs::read(path).map_err(|source| CheckpointError::Io { path: at(), source })?;
     let version = (data.len() >= 16 && &data[..15] == MAGIC).then(|| data[15]);
     let ours = |v: u8| (v == VERSION_CLUSTERED) == clustered;
     match version {
         Some(v @ (1 | 2 | VERSION_CLUSTERED)) if !ours(v) => return Err(other_hierarchy(path, v)),
         Some(1 | 2 | VERSION_CLUSTERED) if data.len() >= 16 + header + 8 => {}
-        _ => return Err(bad("not a Radiant bake checkpoint (or another version)")),
+        _ => return Err(CheckpointError::NotACheckpoint { path: at() }.into()),
     }
     let (body, sum) = data.split_at(data.len() - 8);
     let mut h = Fnv::new();
     h.bytes(body);
     if sum != h.0.to_le_bytes() {
-        return Err(bad("checksum mismatch: the file is damaged"));
+        return Err(CheckpointError::Damaged { path: at() }.into());
     }
     let v = data[15];
     Ok((data, v))
+}
+
+fn corrupt(path: &Path, what: &'static str) -> BakeError {
+    CheckpointError::Corrupt {
+        path: path.display().to_string(),
+        what,
+    }
+    .into()
 }
 
 fn other_hierarchy(path: &Path, version: u8) -> BakeError {
@@ -353,7 +433,7 @@ pub fn write_clustered(
 /// Reads and checks a clustered checkpoint (sizes before allocation, structure, finite
 /// values); a per-triangle one is [`BakeError::CheckpointHierarchy`].
 pub fn read_clustered(path: &Path) -> Result<SavedClustered, BakeError> {
-    let bad = |what: &str| BakeError::Checkpoint(format!("{}: {what}", path.display()));
+    let bad = |what: &'static str| corrupt(path, what);
     let (data, _) = open(path, true, 40)?;
     let body = &data[..data.len() - 8];
     let mut c = Cursor { data: body, at: 16 };
@@ -395,7 +475,10 @@ pub fn read_clustered(path: &Path) -> Result<SavedClustered, BakeError> {
 
 /// Appends the checksum and writes `buf` to `path` atomically (temporary file, fsync, rename).
 fn write_atomically(path: &Path, mut buf: Vec<u8>) -> Result<(), BakeError> {
-    let io = |e: std::io::Error| BakeError::Checkpoint(format!("{}: {e}", path.display()));
+    let io = |source: std::io::Error| CheckpointError::Io {
+        path: path.display().to_string(),
+        source,
+    };
     let mut h = Fnv::new();
     h.bytes(&buf);
     buf.extend_from_slice(&h.0.to_le_bytes());

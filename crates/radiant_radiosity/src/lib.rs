@@ -114,7 +114,7 @@ pub enum BakeError {
     },
     /// A checkpoint could not be written, read, or does not fit this scene.
     #[error("checkpoint: {0}")]
-    Checkpoint(String),
+    Checkpoint(#[from] checkpoint::CheckpointError),
     /// A checkpoint of the other hierarchy (a per-triangle bake's, version 1 or 2, read by a
     /// clustered bake, or the reverse): nothing is wrong with the file, but this bake cannot
     /// use it. Bake again (the new bake writes its own).

@@ -120,9 +120,7 @@ impl BakeResult {
     /// Writes the links and the solution to `path` (see [`crate::Bake::write_checkpoint`]).
     pub fn write_checkpoint(&self, path: &std::path::Path) -> Result<(), BakeError> {
         if self.report.clusters.is_some() {
-            return Err(BakeError::Checkpoint(
-                "bakes of the clustered hierarchy have no checkpoints yet: use --hierarchy triangles".into(),
-            ));
+            return Err(crate::checkpoint::CheckpointError::ClusteredResult.into());
         }
         crate::checkpoint::write(
             path,

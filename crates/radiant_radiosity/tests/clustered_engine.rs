@@ -2,6 +2,7 @@
 //! without refining, the other hierarchy's files refused with a typed "rebake" error, damaged
 //! or foreign files refused), and material and light edits that keep the links.
 
+use radiant_radiosity::checkpoint::CheckpointError;
 use radiant_radiosity::cluster::{ClusterBake, ClusterParams, Watch};
 use radiant_radiosity::{Bake, BakeError, BakeParams, BakeResult};
 use radiant_scene::Scene;
@@ -110,13 +111,13 @@ fn checkpoints_of_the_other_hierarchy_other_geometry_or_damaged_are_typed_errors
     moved.triangles[0].vertices[0].x += 0.01;
     assert!(matches!(
         ClusterBake::resume(&moved, &p, &cp, &v3),
-        Err(BakeError::Checkpoint(_))
+        Err(BakeError::Checkpoint(CheckpointError::OtherScene { expected, found })) if expected != found
     ));
     // Other visibility samples per link: other links.
     let more = ClusterParams { samples: 8, ..cp };
     assert!(matches!(
         ClusterBake::resume(&scene, &p, &more, &v3),
-        Err(BakeError::Checkpoint(_))
+        Err(BakeError::Checkpoint(CheckpointError::OtherScene { .. }))
     ));
     // Written when nothing emitted (materials are not in the fingerprint): no links to
     // resume from, refused rather than solved with none.
@@ -126,7 +127,7 @@ fn checkpoints_of_the_other_hierarchy_other_geometry_or_damaged_are_typed_errors
     fresh(&dark, &p).write_checkpoint(&v3_dark).expect("writes");
     assert!(matches!(
         ClusterBake::resume(&scene, &p, &cp, &v3_dark),
-        Err(BakeError::Checkpoint(_))
+        Err(BakeError::Checkpoint(CheckpointError::NoLinks))
     ));
     let _ = std::fs::remove_file(&v3_dark);
     // Damaged: every byte flipped in turn (a stride through the file) is refused, never a
@@ -144,7 +145,7 @@ fn checkpoints_of_the_other_hierarchy_other_geometry_or_damaged_are_typed_errors
     std::fs::write(&v3, &good[..good.len() / 2]).expect("writes");
     assert!(matches!(
         ClusterBake::resume(&scene, &p, &cp, &v3),
-        Err(BakeError::Checkpoint(_))
+        Err(BakeError::Checkpoint(CheckpointError::Damaged { .. }))
     ));
     let _ = std::fs::remove_file(&v2);
     let _ = std::fs::remove_file(&v3);

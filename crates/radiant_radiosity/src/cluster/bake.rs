@@ -14,6 +14,7 @@ use super::{
     Budget, COARSEN_STEPS, ClusterParams, ClusterReport, Phase, Sweep, Watch, check, refine,
 };
 use crate::BakeError;
+use crate::checkpoint::CheckpointError;
 use crate::input::{self, Lighting};
 use crate::mesh::Mesh;
 use crate::metrics::surface_means;
@@ -148,10 +149,12 @@ impl ClusterBake {
         input::validate(scene)?;
         check(params, cp)?;
         let fingerprint = fingerprint(scene, params, cp);
-        if saved.as_ref().is_some_and(|s| s.fingerprint != fingerprint) {
-            return Err(BakeError::Checkpoint(
-                "it was written for other geometry or bake parameters".into(),
-            ));
+        if let Some(s) = saved.as_ref().filter(|s| s.fingerprint != fingerprint) {
+            return Err(CheckpointError::OtherScene {
+                expected: fingerprint,
+                found: s.fingerprint,
+            }
+            .into());
         }
         let mut times = PhaseTimes::default();
         let mut budget = Budget::new(cp.memory_limit);
@@ -184,15 +187,17 @@ impl ClusterBake {
         let (sys, refinement_used, b) = match saved {
             Some(sv) => {
                 if sv.dead.len() != n || sv.nodes != tree.len() {
-                    return Err(BakeError::Checkpoint(
-                        "its element hierarchy differs from this scene's".into(),
-                    ));
+                    return Err(CheckpointError::OtherMesh {
+                        elements: n,
+                        nodes: tree.len(),
+                        found_elements: sv.dead.len(),
+                        found_nodes: sv.nodes,
+                    }
+                    .into());
                 }
                 if has_emitters && sv.rows.src.is_empty() && n > 0 {
                     // Written when nothing emitted, so it has no links to resume from.
-                    return Err(BakeError::Checkpoint(
-                        "it was written when nothing emitted and holds no links".into(),
-                    ));
+                    return Err(CheckpointError::NoLinks.into());
                 }
                 budget.reserve("the links", sv.rows.src.len() as u64 * LINK_BYTES)?;
                 let sys = HierSystem::from_rows(&mesh, &tree, sv.rows, rho, source, sv.dead);
