@@ -25,7 +25,7 @@ macro_rules! library_value {
             }
 
             fn to_possible_value(&self) -> Option<PossibleValue> {
-                #[allow(unused_mut)]
+                #[allow(unused_mut, reason = "mutated only when the enum has aliases")]
                 let mut v = PossibleValue::new(self.0.name());
                 $(for (alias, kind) in $aliases {
                     if *kind == self.0 {

@@ -457,9 +457,10 @@ fn drain(world: &mut World) {
     if reports.is_empty() {
         return;
     }
-    let tolerance = world
-        .get_resource::<RadiosityBake>()
-        .map_or(1e-4, |b| b.params.solver_params.tolerance);
+    let tolerance = (world.get_resource::<RadiosityBake>())
+        .map_or_else(BakeParams::default, |b| b.params)
+        .solver_params
+        .tolerance;
     let epoch = world.resource::<BakeWorker>().epoch;
     for r in reports {
         let mut s = world.resource_mut::<BakeStatus>();
