@@ -232,7 +232,7 @@ fn main() -> anyhow::Result<()> {
         ];
         println!("graph texture memory at {w}×{h}:");
         for (name, s) in variants {
-            let (graph, _) = frame.build_graph(&gpu.device, w, h, wgpu_format(), &s)?;
+            let (graph, _) = frame.build_graph(w, h, wgpu_format(), &s)?;
             let r = graph.compile()?.report();
             println!(
                 "  {name:<24} {:2} passes, {:2} textures in {:2} allocations, {:7.2} MiB",

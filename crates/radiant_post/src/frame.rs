@@ -19,7 +19,7 @@ use radiant_render::ssao::{AO_FORMAT, Ssao, SsaoPipeline, ssao_pass};
 use radiant_render::{GpuContext, RenderError, Requirements};
 
 use crate::bloom::{BLOOM_FORMAT, Bloom, BloomPipeline, bloom_pass};
-use crate::blur::{BlurPipeline, GaussianBlur, gaussian_blur};
+use crate::blur::{BlurPipeline, GaussianBlur, blur_pass};
 use crate::overlay::{Overlay, OverlayPipeline, overlay_pass};
 use crate::sobel::{Sobel, SobelInputs, SobelPipeline, sobel_pass};
 use crate::tonemapping::{Tonemapping, TonemappingPipeline, tonemapping_pass};
@@ -274,7 +274,6 @@ impl FrameRenderer {
     /// Builds the frame's graph (not compiled). `target` is the imported output.
     pub fn build_graph(
         &self,
-        device: &wgpu::Device,
         width: u32,
         height: u32,
         format: wgpu::TextureFormat,
@@ -300,33 +299,19 @@ impl FrameRenderer {
             ),
             None => target,
         };
-        let gb = gbuffer_pass(&mut g, width, height, p.gbuffer.clone(), self.scene.clone());
+        let scene = &self.scene;
+        let gb = gbuffer_pass(&mut g, (width, height), scene, &p.gbuffer)?;
         let ao = match settings.ssao {
-            Some(s) if self.support.ssao => Some(ssao_pass(
-                &mut g,
-                &gb,
-                &s,
-                p.ssao.clone(),
-                self.scene.clone(),
-                device,
-            )),
+            Some(s) if self.support.ssao => Some(ssao_pass(&mut g, &gb, scene, &s, &p.ssao)?),
             Some(_) => {
                 tracing::warn!("SSAO requested but unsupported here: skipped");
                 None
             }
             None => None,
         };
-        let lit = lighting_pass(
-            &mut g,
-            &gb,
-            ao,
-            settings.debug_view,
-            p.lighting.clone(),
-            self.scene.clone(),
-            device,
-        );
+        let lit = lighting_pass(&mut g, (&gb, ao), scene, settings.debug_view, &p.lighting)?;
         let hdr = match settings.bloom {
-            Some(b) if self.support.bloom => bloom_pass(&mut g, lit, &b, &p.bloom, device),
+            Some(b) if self.support.bloom => bloom_pass(&mut g, lit, &b, &p.bloom)?,
             Some(_) => {
                 tracing::warn!("bloom requested but unsupported here: skipped");
                 lit
@@ -335,33 +320,19 @@ impl FrameRenderer {
         };
         g.export(hdr);
         if settings.blur.is_none() && settings.sobel.is_none() {
-            tonemapping_pass(
-                &mut g,
-                hdr,
-                target,
-                &settings.tonemapping,
-                &p.tonemapping,
-                device,
-            );
-            self.add_overlay(&mut g, target, final_target, device);
+            tonemapping_pass(&mut g, hdr, target, &settings.tonemapping, &p.tonemapping)?;
+            self.overlay_pass(&mut g, target, final_target)?;
             return Ok((g, hdr));
         }
         let ldr = g.create(
             "ldr",
             TextureDesc::new(width, height, wgpu::TextureFormat::Rgba8UnormSrgb),
         );
-        tonemapping_pass(
-            &mut g,
-            hdr,
-            ldr,
-            &settings.tonemapping,
-            &p.tonemapping,
-            device,
-        );
-        let mut current = ldr;
+        let mut current =
+            tonemapping_pass(&mut g, hdr, ldr, &settings.tonemapping, &p.tonemapping)?;
         if let Some(b) = &settings.blur {
             let out = settings.sobel.is_none().then_some(target);
-            current = gaussian_blur(&mut g, current, b, out, &p.blur, device);
+            current = blur_pass(&mut g, current, b, out, &p.blur)?;
         }
         if let Some(s) = &settings.sobel {
             let inputs = SobelInputs {
@@ -370,19 +341,19 @@ impl FrameRenderer {
                 normal: Some(gb.normal),
                 near_far: [self.camera.near, self.camera.far],
             };
-            sobel_pass(&mut g, inputs, s, Some(target), &p.sobel, device)?;
+            sobel_pass(&mut g, inputs, s, Some(target), &p.sobel)?;
         }
-        self.add_overlay(&mut g, target, final_target, device);
+        self.overlay_pass(&mut g, target, final_target)?;
         Ok((g, hdr))
     }
 
-    fn add_overlay(
+    /// The overlay's pass from the composited frame into the target, when there is an overlay.
+    fn overlay_pass(
         &self,
         g: &mut RenderGraph,
         composited: TextureHandle,
         target: TextureHandle,
-        device: &wgpu::Device,
-    ) {
+    ) -> Result<(), RenderError> {
         if let Some(overlay) = &self.overlay {
             overlay_pass(
                 g,
@@ -390,9 +361,9 @@ impl FrameRenderer {
                 target,
                 overlay.clone(),
                 &self.pipelines.overlay,
-                device,
-            );
+            )?;
         }
+        Ok(())
     }
 
     fn prepare(
@@ -402,7 +373,7 @@ impl FrameRenderer {
         height: u32,
         format: wgpu::TextureFormat,
         settings: &FrameSettings,
-    ) -> Result<(), RenderError> {
+    ) -> Result<&Compiled, RenderError> {
         let max = gpu.device.limits().max_texture_dimension_2d;
         if width == 0 || height == 0 || width > max || height > max {
             return Err(RenderError::InvalidSize { width, height, max });
@@ -416,20 +387,19 @@ impl FrameRenderer {
             scene_generation: self.scene_generation,
             overlay_generation: self.overlay_generation,
         };
-        if self.compiled.as_ref().is_some_and(|c| c.key == key) {
-            return Ok(());
-        }
         if let Some(old) = self.compiled.take() {
+            if old.key == key {
+                return Ok(self.compiled.insert(old));
+            }
             self.pool.release(old.graph);
         }
-        let (graph, hdr) = self.build_graph(&gpu.device, width, height, format, settings)?;
+        let (graph, hdr) = self.build_graph(width, height, format, settings)?;
         let graph = graph.compile()?.realize(&gpu.device, &mut self.pool);
         // Textures the new graph did not take back are freed now, not kept.
         self.pool.trim();
         self.compiles += 1;
         tracing::debug!("frame graph compiled: {}", graph.report());
-        self.compiled = Some(Compiled { key, graph, hdr });
-        Ok(())
+        Ok(self.compiled.insert(Compiled { key, graph, hdr }))
     }
 
     /// Renders one frame into `target` (a view of a `width × height` texture of `format`).
@@ -443,12 +413,9 @@ impl FrameRenderer {
         format: wgpu::TextureFormat,
         settings: &FrameSettings,
     ) -> Result<(), RenderError> {
-        self.prepare(gpu, width, height, format, settings)?;
         self.scene
             .write_camera(&gpu.queue, &self.camera, width, height);
-        let Some(c) = &self.compiled else {
-            return Err(RenderError::Graph("no compiled graph".into()));
-        };
+        let c = self.prepare(gpu, width, height, format, settings)?;
         c.graph.execute(gpu, &[target])
     }
 
@@ -462,12 +429,9 @@ impl FrameRenderer {
         format: wgpu::TextureFormat,
         settings: &FrameSettings,
     ) -> Result<PassTimings, RenderError> {
-        self.prepare(gpu, width, height, format, settings)?;
         self.scene
             .write_camera(&gpu.queue, &self.camera, width, height);
-        let Some(c) = &self.compiled else {
-            return Err(RenderError::Graph("no compiled graph".into()));
-        };
+        let c = self.prepare(gpu, width, height, format, settings)?;
         let t = c.graph.execute_timed(gpu, &[target])?;
         gpu.take_errors()?;
         Ok(t)
@@ -502,9 +466,7 @@ impl FrameRenderer {
         self.render(gpu, &view, width, height, format, settings)?;
         gpu.take_errors()?;
         let ldr = read_texture(gpu, &target)?;
-        let hdr_tex = self
-            .hdr_texture()
-            .ok_or_else(|| RenderError::Graph("no HDR texture".into()))?;
+        let hdr_tex = self.hdr_texture().ok_or(RenderError::NoFrame)?;
         let hdr = read_texture(gpu, hdr_tex)?;
         Ok(Capture { ldr, hdr })
     }

@@ -10,12 +10,12 @@ use common::*;
 use glam::{DVec3, Vec3};
 use radiant_color::Tonemap;
 use radiant_post::bloom::{Bloom, BloomComposite, BloomPipeline, bloom_pass};
-use radiant_post::blur::{BlurPipeline, GaussianBlur, gaussian_blur};
+use radiant_post::blur::{BlurPipeline, GaussianBlur, blur_pass};
 use radiant_post::frame::{FrameRenderer, FrameSettings};
 use radiant_post::sobel::{Sobel, SobelInputs, SobelPipeline, sobel_pass};
 use radiant_post::tonemapping::{Tonemapping, TonemappingPipeline, tonemapping_pass};
 use radiant_render::RenderError;
-use radiant_render::graph::TextureDesc;
+use radiant_render::graph::{RenderGraph, TextureDesc, TexturePool};
 use radiant_render::lighting::DebugView;
 use radiant_render::scene::{Light, LightKind, RenderScene};
 use radiant_render::ssao::Ssao;
@@ -49,8 +49,7 @@ fn tonemapping_matches_the_cpu_operators_within_one_step() {
                     "ldr",
                     TextureDesc::new(w, h, wgpu::TextureFormat::Rgba8UnormSrgb),
                 );
-                tonemapping_pass(g, hdr, t, &settings, &pipeline, &gpu.device);
-                t
+                tonemapping_pass(g, hdr, t, &settings, &pipeline).expect("tonemapping")
             });
             let mut worst = 0i32;
             for (i, t) in texels.iter().enumerate() {
@@ -84,7 +83,7 @@ fn blur_of_a_single_pixel_is_the_gaussian_kernel() {
         passes: 1,
     };
     let out = run_node(&gpu, &input, |g, i| {
-        gaussian_blur(g, i, &settings, None, &pipeline, &gpu.device)
+        blur_pass(g, i, &settings, None, &pipeline).expect("blur")
     });
     let w = settings.weights();
     let r = w.len() as i32 - 1;
@@ -114,7 +113,7 @@ fn blur_of_a_single_pixel_is_the_gaussian_kernel() {
         ..settings
     };
     let out = run_node(&gpu, &input, |g, i| {
-        gaussian_blur(g, i, &twice, None, &pipeline, &gpu.device)
+        blur_pass(g, i, &twice, None, &pipeline).expect("blur")
     });
     let centre: f32 = w[0] * w[0] + 2.0 * w[1..].iter().map(|x| x * x).sum::<f32>();
     assert!((out.at(16, 16)[0] - centre * centre).abs() < 1e-6);
@@ -154,7 +153,7 @@ fn energy_conserving_bloom_adds_no_energy_and_additive_does() {
             ..settings
         };
         let out = run_node(&gpu, &input, |g, i| {
-            bloom_pass(g, i, &settings, &pipeline, &gpu.device)
+            bloom_pass(g, i, &settings, &pipeline).expect("bloom")
         });
         let e_out = sum(&out.texels);
         assert!(
@@ -174,7 +173,7 @@ fn energy_conserving_bloom_adds_no_energy_and_additive_does() {
         ..Bloom::LECTURE
     };
     let out = run_node(&gpu, &input, |g, i| {
-        bloom_pass(g, i, &additive, &pipeline, &gpu.device)
+        bloom_pass(g, i, &additive, &pipeline).expect("bloom")
     });
     assert!(sum(&out.texels) > e_in * 1.01, "additive bloom adds light");
 }
@@ -206,7 +205,7 @@ fn sobel_of_a_step_edge_marks_exactly_the_edge() {
             normal: None,
             near_far: [0.1, 10.0],
         };
-        sobel_pass(g, inputs, &settings, None, &pipeline, &gpu.device).expect("sobel")
+        sobel_pass(g, inputs, &settings, None, &pipeline).expect("sobel")
     });
     for y in 0..h {
         for x in 0..w {
@@ -441,9 +440,7 @@ fn disabling_an_effect_removes_its_passes_and_textures() {
     let frame = FrameRenderer::new(&gpu, &cornell()).expect("renderer");
     let fmt = wgpu::TextureFormat::Rgba8UnormSrgb;
     let report = |s: &FrameSettings| {
-        let (g, _) = frame
-            .build_graph(&gpu.device, 320, 240, fmt, s)
-            .expect("graph");
+        let (g, _) = frame.build_graph(320, 240, fmt, s).expect("graph");
         g.compile().expect("compiles").report()
     };
     let full = report(&FrameSettings::default());
@@ -1442,4 +1439,106 @@ fn a_light_map_of_several_pages_looks_like_one_page() {
         "{differ} of {} pixels differ",
         w * h
     );
+}
+
+#[test]
+fn a_pass_binds_what_its_layout_declares_and_only_its_own_textures() {
+    use radiant_render::graph::GraphError;
+    use radiant_render::pass::{BindLayout, SimplePass, Slot, UNFILTERABLE};
+    let gpu = gpu();
+    let layout = Arc::new(BindLayout::new(
+        &gpu.device,
+        "test_layout",
+        wgpu::ShaderStages::FRAGMENT,
+        &[Slot::Texture(UNFILTERABLE), Slot::Uniform],
+    ));
+    let desc = TextureDesc::new(4, 4, wgpu::TextureFormat::Rgba8Unorm);
+    let pipeline = |g: &mut RenderGraph| {
+        let a = g.create("a", desc);
+        let out = g.create("out", desc);
+        (a, out)
+    };
+
+    // Too few resources for the layout: a typed error naming both counts, before any GPU work.
+    let mut g = RenderGraph::new();
+    let (a, _) = pipeline(&mut g);
+    let mut pass = g.add_pass("short_pass");
+    let err = layout
+        .bind(&mut pass, vec![radiant_render::pass::Bind::Read(a)])
+        .expect_err("one resource for two slots");
+    assert_eq!(
+        err,
+        GraphError::BindCount {
+            pass: "short_pass",
+            layout: "test_layout",
+            expected: 2,
+            given: 1,
+        }
+    );
+
+    // A buffer where the layout takes a texture.
+    let mut g = RenderGraph::new();
+    let (_, out) = pipeline(&mut g);
+    let buffer = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: None,
+        size: 16,
+        usage: wgpu::BufferUsages::UNIFORM,
+        mapped_at_creation: false,
+    });
+    let err = SimplePass::new(&mut g, "kind_pass", &layout, &gpu.device)
+        .buffer(&buffer)
+        .buffer(&buffer)
+        .raster(out, |_, _, _| Ok(()))
+        .expect_err("a buffer in a texture slot");
+    assert!(matches!(
+        err,
+        RenderError::Graph(GraphError::BindKind {
+            pass: "kind_pass",
+            binding: 0,
+            ..
+        })
+    ));
+
+    // A pass that reaches for a texture another pass declared gets a typed error when it runs.
+    let input = upload(&gpu, 4, 4, F32, &[[0.0; 4]; 16]);
+    let mut g = RenderGraph::new();
+    let imported = g.import(
+        "in",
+        TextureDesc {
+            width: 4,
+            height: 4,
+            format: input.format(),
+            usage: input.usage(),
+        },
+    );
+    let (first, second) = (g.create("first", desc), g.create("second", desc));
+    let mut p = g.add_pass("first_pass");
+    p.read(imported);
+    let foreign = p.write(first);
+    p.render(|_| Ok(()));
+    let mut p = g.add_pass("second_pass");
+    p.read(first);
+    p.write(second);
+    p.render(move |ctx| ctx.view(foreign).map(|_| ()));
+    g.export(second);
+    let mut pool = TexturePool::new();
+    let compiled = g
+        .compile()
+        .expect("compiles")
+        .realize(&gpu.device, &mut pool);
+    let view = input.create_view(&Default::default());
+    assert!(matches!(
+        compiled.execute(&gpu, &[&view]),
+        Err(RenderError::Graph(GraphError::Undeclared {
+            pass: "second_pass"
+        }))
+    ));
+    // And a wrong number of imported views is typed too.
+    assert!(matches!(
+        compiled.execute(&gpu, &[]),
+        Err(RenderError::Graph(GraphError::Imports {
+            expected: 1,
+            given: 0
+        }))
+    ));
 }

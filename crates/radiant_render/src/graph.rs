@@ -1,15 +1,22 @@
 //! The render graph: passes declare the virtual textures they read and write, and compiling the
 //! graph culls, orders and allocates.
 //!
-//! A pass is a function over typed handles that returns its outputs (the kajiya/rend3 shape):
+//! A pass is a function over typed handles that returns its outputs (the kajiya/rend3 shape).
+//! Declaring a read or a write on a [`PassBuilder`] returns the [`Ref`] the pass binds when it
+//! runs, so a pass reaches exactly the textures it declared (kajiya's `pass_builder.rs`):
 //!
 //! ```
 //! use radiant_render::graph::{RenderGraph, TextureDesc, TextureHandle};
 //!
-//! fn blur(graph: &mut RenderGraph, input: TextureHandle) -> TextureHandle {
+//! fn blur_pass(graph: &mut RenderGraph, input: TextureHandle) -> TextureHandle {
 //!     let desc = graph.desc(input);
 //!     let out = graph.create("blur_out", desc);
-//!     graph.add_pass("blur_pass", &[input], &[out], move |_ctx| { /* encode commands */ });
+//!     let mut pass = graph.add_pass("blur_pass");
+//!     let (input, output) = (pass.read(input), pass.write(out));
+//!     pass.render(move |ctx| {
+//!         let (_src, _dst) = (ctx.view(input)?, ctx.view(output)?); // encode commands
+//!         Ok(())
+//!     });
 //!     out
 //! }
 //!
@@ -17,9 +24,14 @@
 //! let desc = TextureDesc::new(64, 64, wgpu::TextureFormat::Rgba16Float);
 //! let target = graph.import("target", desc);
 //! let hdr = graph.create("hdr", desc);
-//! graph.add_pass("draw", &[], &[hdr], |_ctx| {});
-//! let unused = blur(&mut graph, hdr); // nobody reads this: culled
-//! graph.add_pass("present", &[hdr], &[target], |_ctx| {});
+//! let mut draw = graph.add_pass("draw");
+//! draw.write(hdr);
+//! draw.render(|_ctx| Ok(()));
+//! let unused = blur_pass(&mut graph, hdr); // nobody reads this: culled
+//! let mut present = graph.add_pass("present");
+//! present.read(hdr);
+//! present.write(target);
+//! present.render(|_ctx| Ok(()));
 //! let plan = graph.compile().unwrap();
 //! assert_eq!(plan.report().passes, vec!["draw", "present"]);
 //! assert_eq!(plan.report().culled, vec!["blur_pass"]);
@@ -34,6 +46,7 @@
 //! whose lifetimes do not overlap share one allocation.
 
 use std::collections::HashMap;
+use std::marker::PhantomData;
 
 use crate::{GpuContext, RenderError};
 
@@ -94,6 +107,22 @@ impl TextureHandle {
     }
 }
 
+/// Access marker of a [`Ref`] to a texture a pass reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Read;
+
+/// Access marker of a [`Ref`] to a texture a pass writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Write;
+
+/// A texture as one pass declared it: the only way that pass's closure reaches its view.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Ref<A> {
+    pass: u32,
+    texture: TextureHandle,
+    access: PhantomData<A>,
+}
+
 /// What a pass gets when it runs: the device, an encoder and the views of its textures.
 pub struct PassContext<'a> {
     /// The device, to create bind groups.
@@ -102,24 +131,23 @@ pub struct PassContext<'a> {
     pub queue: &'a wgpu::Queue,
     /// The frame's command encoder.
     pub encoder: &'a mut wgpu::CommandEncoder,
+    pass: u32,
+    name: &'static str,
     views: &'a [Option<&'a wgpu::TextureView>],
-    descs: &'a [TextureDesc],
 }
 
 impl<'a> PassContext<'a> {
-    /// The view of a texture the pass declared.
-    pub fn view(&self, handle: TextureHandle) -> &'a wgpu::TextureView {
-        // Compilation keeps every texture a live pass names, so this always holds.
-        self.views[handle.index()].expect("a live pass names only live textures")
-    }
-
-    /// The description of a texture.
-    pub fn desc(&self, handle: TextureHandle) -> TextureDesc {
-        self.descs[handle.index()]
+    /// The view of a texture this pass declared. A [`Ref`] another pass declared is an error.
+    pub fn view<A>(&self, r: Ref<A>) -> Result<&'a wgpu::TextureView, GraphError> {
+        // Compilation keeps every texture a live pass declares, so a ref of this pass resolves.
+        let view = (r.pass == self.pass)
+            .then(|| self.views.get(r.texture.index()).copied().flatten())
+            .flatten();
+        view.ok_or(GraphError::Undeclared { pass: self.name })
     }
 }
 
-type PassFn = Box<dyn Fn(&mut PassContext<'_>) + Send + Sync>;
+type PassFn = Box<dyn Fn(&mut PassContext<'_>) -> Result<(), GraphError> + Send + Sync>;
 
 struct VirtualTexture {
     name: &'static str,
@@ -177,6 +205,104 @@ pub enum GraphError {
     /// A handle from another graph.
     #[error("a texture handle does not belong to this graph")]
     ForeignHandle,
+    /// A pass used a texture reference another pass declared.
+    #[error("pass `{pass}` used a texture it did not declare")]
+    Undeclared {
+        /// The pass.
+        pass: &'static str,
+    },
+    /// A pass bound a different number of resources than its layout has slots.
+    #[error("pass `{pass}` binds {given} resources to `{layout}`, which has {expected} slots")]
+    BindCount {
+        /// The pass.
+        pass: &'static str,
+        /// The bind-group layout.
+        layout: &'static str,
+        /// Slots of the layout.
+        expected: usize,
+        /// Resources given.
+        given: usize,
+    },
+    /// A pass bound the wrong kind of resource to a slot.
+    #[error(
+        "pass `{pass}` binds the wrong kind of resource at `{layout}` binding {binding}: it takes {expected}"
+    )]
+    BindKind {
+        /// The pass.
+        pass: &'static str,
+        /// The bind-group layout.
+        layout: &'static str,
+        /// The binding index.
+        binding: u32,
+        /// What the slot takes.
+        expected: &'static str,
+    },
+    /// `execute` got a different number of imported views than the graph imports.
+    #[error("the graph imports {expected} textures, {given} given")]
+    Imports {
+        /// Imports of the graph.
+        expected: usize,
+        /// Views given.
+        given: usize,
+    },
+}
+
+/// Declares what one pass reads and writes, then takes the closure that records it
+/// ([`RenderGraph::add_pass`]). A pass that is never given its closure does not exist.
+pub struct PassBuilder<'g> {
+    graph: &'g mut RenderGraph,
+    name: &'static str,
+    reads: Vec<TextureHandle>,
+    writes: Vec<TextureHandle>,
+}
+
+impl PassBuilder<'_> {
+    /// The pass's name.
+    pub fn name(&self) -> &'static str {
+        self.name
+    }
+
+    fn reference<A>(&self, texture: TextureHandle) -> Ref<A> {
+        Ref {
+            pass: self.graph.passes.len() as u32,
+            texture,
+            access: PhantomData,
+        }
+    }
+
+    /// Declares a read of `texture`; the returned ref binds it.
+    pub fn read(&mut self, texture: TextureHandle) -> Ref<Read> {
+        if !self.reads.contains(&texture) {
+            self.reads.push(texture);
+        }
+        self.reference(texture)
+    }
+
+    /// Declares a write of `texture`; the returned ref binds it.
+    pub fn write(&mut self, texture: TextureHandle) -> Ref<Write> {
+        if !self.writes.contains(&texture) {
+            self.writes.push(texture);
+        }
+        self.reference(texture)
+    }
+
+    /// The description of a texture of the graph.
+    pub fn desc(&self, texture: TextureHandle) -> TextureDesc {
+        self.graph.desc(texture)
+    }
+
+    /// Adds the pass, recorded by `run` each frame.
+    pub fn render(
+        self,
+        run: impl Fn(&mut PassContext<'_>) -> Result<(), GraphError> + Send + Sync + 'static,
+    ) {
+        self.graph.passes.push(PassNode {
+            name: self.name,
+            reads: self.reads,
+            writes: self.writes,
+            run: Box::new(run),
+        });
+    }
 }
 
 impl RenderGraph {
@@ -223,20 +349,14 @@ impl RenderGraph {
             .unwrap_or(TextureDesc::new(1, 1, wgpu::TextureFormat::Rgba8Unorm))
     }
 
-    /// Adds a pass that reads `reads`, writes `writes`, and encodes its commands in `run`.
-    pub fn add_pass(
-        &mut self,
-        name: &'static str,
-        reads: &[TextureHandle],
-        writes: &[TextureHandle],
-        run: impl Fn(&mut PassContext<'_>) + Send + Sync + 'static,
-    ) {
-        self.passes.push(PassNode {
+    /// Starts a pass: declare its reads and writes on the builder, then give it its closure.
+    pub fn add_pass(&mut self, name: &'static str) -> PassBuilder<'_> {
+        PassBuilder {
+            graph: self,
             name,
-            reads: reads.to_vec(),
-            writes: writes.to_vec(),
-            run: Box::new(run),
-        });
+            reads: Vec::new(),
+            writes: Vec::new(),
+        }
     }
 
     /// Culls, orders and plans the allocation of the graph. Pure CPU.
@@ -561,28 +681,28 @@ impl CompiledGraph {
         gpu: &GpuContext,
         encoder: &mut wgpu::CommandEncoder,
         views: &[Option<&wgpu::TextureView>],
-        descs: &[TextureDesc],
-    ) {
+    ) -> Result<(), GraphError> {
+        let node = &self.plan.passes[p];
         let mut ctx = PassContext {
             device: &gpu.device,
             queue: &gpu.queue,
             encoder,
+            pass: p as u32,
+            name: node.name,
             views,
-            descs,
         };
-        (self.plan.passes[p].run)(&mut ctx);
+        (node.run)(&mut ctx)
     }
 
     fn resolve<'a>(
         &'a self,
         imports: &[&'a wgpu::TextureView],
-    ) -> Result<Vec<Option<&'a wgpu::TextureView>>, RenderError> {
+    ) -> Result<Vec<Option<&'a wgpu::TextureView>>, GraphError> {
         if imports.len() != self.plan.imports {
-            return Err(RenderError::Graph(format!(
-                "the graph imports {} textures, {} given",
-                self.plan.imports,
-                imports.len()
-            )));
+            return Err(GraphError::Imports {
+                expected: self.plan.imports,
+                given: imports.len(),
+            });
         }
         Ok(self
             .plan
@@ -605,14 +725,13 @@ impl CompiledGraph {
         imports: &[&wgpu::TextureView],
     ) -> Result<(), RenderError> {
         let views = self.resolve(imports)?;
-        let descs: Vec<TextureDesc> = self.plan.textures.iter().map(|t| t.desc).collect();
         let mut encoder = gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("render_graph"),
             });
         for &p in &self.plan.order {
-            self.run_pass(p, gpu, &mut encoder, &views, &descs);
+            self.run_pass(p, gpu, &mut encoder, &views)?;
         }
         gpu.queue.submit([encoder.finish()]);
         Ok(())
@@ -626,7 +745,6 @@ impl CompiledGraph {
         imports: &[&wgpu::TextureView],
     ) -> Result<PassTimings, RenderError> {
         let views = self.resolve(imports)?;
-        let descs: Vec<TextureDesc> = self.plan.textures.iter().map(|t| t.desc).collect();
         let n = self.plan.order.len() as u32;
         if gpu.has_timestamps() && n > 0 {
             let qs = gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
@@ -654,7 +772,7 @@ impl CompiledGraph {
                 });
             encoder.write_timestamp(&qs, 0);
             for (i, &p) in self.plan.order.iter().enumerate() {
-                self.run_pass(p, gpu, &mut encoder, &views, &descs);
+                self.run_pass(p, gpu, &mut encoder, &views)?;
                 encoder.write_timestamp(&qs, i as u32 + 1);
             }
             encoder.resolve_query_set(&qs, 0..n + 1, &resolve, 0);
@@ -686,7 +804,7 @@ impl CompiledGraph {
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("render_graph_pass"),
                 });
-            self.run_pass(p, gpu, &mut encoder, &views, &descs);
+            self.run_pass(p, gpu, &mut encoder, &views)?;
             gpu.queue.submit([encoder.finish()]);
             let _ = gpu.device.poll(wgpu::PollType::wait_indefinitely());
             passes.push((self.plan.passes[p].name, t0.elapsed().as_secs_f64() * 1e3));
@@ -705,6 +823,23 @@ mod tests {
         TextureDesc::new(64, 32, F)
     }
 
+    /// A pass that declares `reads` and `writes` and records nothing.
+    fn pass(
+        g: &mut RenderGraph,
+        name: &'static str,
+        reads: &[TextureHandle],
+        writes: &[TextureHandle],
+    ) {
+        let mut p = g.add_pass(name);
+        for &r in reads {
+            p.read(r);
+        }
+        for &w in writes {
+            p.write(w);
+        }
+        p.render(|_| Ok(()));
+    }
+
     #[test]
     fn culls_passes_that_do_not_reach_the_target_and_allocates_nothing_for_them() {
         let mut g = RenderGraph::new();
@@ -712,10 +847,10 @@ mod tests {
         let a = g.create("a", desc());
         let unused = g.create("unused", TextureDesc::new(512, 512, F));
         let unused2 = g.create("unused2", desc());
-        g.add_pass("draw", &[], &[a], |_| {});
-        g.add_pass("side", &[a], &[unused], |_| {});
-        g.add_pass("side2", &[unused], &[unused2], |_| {});
-        g.add_pass("present", &[a], &[target], |_| {});
+        pass(&mut g, "draw", &[], &[a]);
+        pass(&mut g, "side", &[a], &[unused]);
+        pass(&mut g, "side2", &[unused], &[unused2]);
+        pass(&mut g, "present", &[a], &[target]);
         let plan = g.compile().expect("compiles");
         let r = plan.report();
         assert_eq!(r.passes, vec!["draw", "present"]);
@@ -731,9 +866,9 @@ mod tests {
         let target = g.import("target", desc());
         let a = g.create("a", desc());
         let b = g.create("b", desc());
-        g.add_pass("present", &[b], &[target], |_| {});
-        g.add_pass("second", &[a], &[b], |_| {});
-        g.add_pass("first", &[], &[a], |_| {});
+        pass(&mut g, "present", &[b], &[target]);
+        pass(&mut g, "second", &[a], &[b]);
+        pass(&mut g, "first", &[], &[a]);
         let r = g.compile().expect("compiles").report();
         assert_eq!(r.passes, vec!["first", "second", "present"]);
     }
@@ -747,11 +882,11 @@ mod tests {
             .iter()
             .map(|n| g.create(n, desc()))
             .collect();
-        g.add_pass("p0", &[], &[t[0]], |_| {});
-        g.add_pass("p1", &[t[0]], &[t[1]], |_| {});
-        g.add_pass("p2", &[t[1]], &[t[2]], |_| {});
-        g.add_pass("p3", &[t[2]], &[t[3]], |_| {});
-        g.add_pass("p4", &[t[3]], &[target], |_| {});
+        pass(&mut g, "p0", &[], &[t[0]]);
+        pass(&mut g, "p1", &[t[0]], &[t[1]]);
+        pass(&mut g, "p2", &[t[1]], &[t[2]]);
+        pass(&mut g, "p3", &[t[2]], &[t[3]]);
+        pass(&mut g, "p4", &[t[3]], &[target]);
         let plan = g.compile().expect("compiles");
         let r = plan.report();
         assert_eq!(r.virtual_textures, 4);
@@ -769,10 +904,10 @@ mod tests {
         let hdr = g.create("hdr", desc());
         let small = g.create("small", TextureDesc::new(32, 16, F));
         let late = g.create("late", desc());
-        g.add_pass("p0", &[], &[hdr], |_| {});
-        g.add_pass("p1", &[hdr], &[small], |_| {});
-        g.add_pass("p2", &[small], &[late], |_| {});
-        g.add_pass("p3", &[late], &[target], |_| {});
+        pass(&mut g, "p0", &[], &[hdr]);
+        pass(&mut g, "p1", &[hdr], &[small]);
+        pass(&mut g, "p2", &[small], &[late]);
+        pass(&mut g, "p3", &[late], &[target]);
         g.export(hdr);
         let plan = g.compile().expect("compiles");
         // Without the export, `late` could reuse `hdr`'s memory.
@@ -785,7 +920,7 @@ mod tests {
     fn export_alone_is_an_output() {
         let mut g = RenderGraph::new();
         let a = g.create("a", desc());
-        g.add_pass("p", &[], &[a], |_| {});
+        pass(&mut g, "p", &[], &[a]);
         g.export(a);
         assert_eq!(g.compile().expect("compiles").report().passes, vec!["p"]);
     }
@@ -795,9 +930,9 @@ mod tests {
         let mut g = RenderGraph::new();
         let t = g.import("t", desc());
         let a = g.create("a", desc());
-        g.add_pass("w1", &[], &[a], |_| {});
-        g.add_pass("w2", &[], &[a], |_| {});
-        g.add_pass("p", &[a], &[t], |_| {});
+        pass(&mut g, "w1", &[], &[a]);
+        pass(&mut g, "w2", &[], &[a]);
+        pass(&mut g, "p", &[a], &[t]);
         assert!(matches!(
             g.compile(),
             Err(GraphError::WrittenTwice { texture: "a", .. })
@@ -806,7 +941,7 @@ mod tests {
         let mut g = RenderGraph::new();
         let t = g.import("t", desc());
         let a = g.create("a", desc());
-        g.add_pass("p", &[a], &[t], |_| {});
+        pass(&mut g, "p", &[a], &[t]);
         assert!(matches!(
             g.compile(),
             Err(GraphError::ReadOfUnwritten { pass: "p", .. })
@@ -814,15 +949,15 @@ mod tests {
 
         let mut g = RenderGraph::new();
         let a = g.create("a", desc());
-        g.add_pass("p", &[], &[a], |_| {});
+        pass(&mut g, "p", &[], &[a]);
         assert!(matches!(g.compile(), Err(GraphError::NoOutput)));
 
         let mut g = RenderGraph::new();
         let t = g.import("t", desc());
         let a = g.create("a", desc());
         let b = g.create("b", desc());
-        g.add_pass("x", &[b], &[a], |_| {});
-        g.add_pass("y", &[a], &[b, t], |_| {});
+        pass(&mut g, "x", &[b], &[a]);
+        pass(&mut g, "y", &[a], &[b, t]);
         assert!(matches!(g.compile(), Err(GraphError::Cycle { .. })));
     }
 

@@ -18,6 +18,7 @@ pub mod graph;
 pub mod instancing;
 pub mod lighting;
 pub mod material;
+pub mod pass;
 pub mod scene;
 pub mod ssao;
 pub mod util;
@@ -65,12 +66,23 @@ pub enum RenderError {
         /// What is missing.
         reason: String,
     },
+    /// A pass needs an input its caller did not give.
+    #[error("pass `{pass}` needs the {input} texture")]
+    MissingInput {
+        /// The pass.
+        pass: &'static str,
+        /// The input it needs.
+        input: &'static str,
+    },
     /// A wgpu validation or out-of-memory error.
     #[error("GPU error: {0}")]
     Gpu(String),
     /// A render graph that does not compile or run.
     #[error("render graph: {0}")]
-    Graph(String),
+    Graph(#[from] graph::GraphError),
+    /// A frame's texture was asked for before any frame was rendered.
+    #[error("no frame has been rendered yet")]
+    NoFrame,
     /// Reading a texture back failed.
     #[error("readback failed: {0}")]
     Readback(String),
@@ -120,10 +132,4 @@ pub enum RenderError {
     /// A file could not be written.
     #[error(transparent)]
     Io(#[from] std::io::Error),
-}
-
-impl From<graph::GraphError> for RenderError {
-    fn from(e: graph::GraphError) -> Self {
-        RenderError::Graph(e.to_string())
-    }
 }

@@ -28,23 +28,6 @@ pub fn storage_entry(binding: u32, stages: wgpu::ShaderStages) -> wgpu::BindGrou
     }
 }
 
-/// A 2D texture binding for fragment and compute shaders.
-pub fn texture_entry(
-    binding: u32,
-    sample_type: wgpu::TextureSampleType,
-) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::FRAGMENT | wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture {
-            sample_type,
-            view_dimension: wgpu::TextureViewDimension::D2,
-            multisampled: false,
-        },
-        count: None,
-    }
-}
-
 /// A fullscreen-triangle render pipeline: `fullscreen_vs` from the shared prelude and
 /// `fragment_entry` from `source`, writing one `format` target with `blend`.
 pub fn fullscreen_pipeline(
@@ -119,54 +102,6 @@ pub fn draw_fullscreen(
     pass.set_pipeline(pipeline);
     pass.set_bind_group(0, bind_group, &[]);
     pass.draw(0..3, 0..1);
-}
-
-/// Render pipelines of one shader, compiled once per target format and kept.
-pub struct PipelinesByFormat {
-    map: std::sync::Mutex<
-        std::collections::HashMap<wgpu::TextureFormat, std::sync::Arc<wgpu::RenderPipeline>>,
-    >,
-}
-
-impl Default for PipelinesByFormat {
-    fn default() -> Self {
-        Self {
-            map: std::sync::Mutex::new(std::collections::HashMap::new()),
-        }
-    }
-}
-
-impl PipelinesByFormat {
-    /// The pipeline for `format`, created by `make` the first time.
-    pub fn get(
-        &self,
-        format: wgpu::TextureFormat,
-        make: impl FnOnce() -> wgpu::RenderPipeline,
-    ) -> std::sync::Arc<wgpu::RenderPipeline> {
-        let mut map = match self.map.lock() {
-            Ok(m) => m,
-            Err(poisoned) => poisoned.into_inner(),
-        };
-        map.entry(format)
-            .or_insert_with(|| std::sync::Arc::new(make()))
-            .clone()
-    }
-}
-
-/// A bind-group entry for a texture view.
-pub fn view_entry(binding: u32, view: &wgpu::TextureView) -> wgpu::BindGroupEntry<'_> {
-    wgpu::BindGroupEntry {
-        binding,
-        resource: wgpu::BindingResource::TextureView(view),
-    }
-}
-
-/// A bind-group entry for a whole buffer.
-pub fn buffer_entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
-    wgpu::BindGroupEntry {
-        binding,
-        resource: buffer.as_entire_binding(),
-    }
 }
 
 /// A sampled 2D texture of `format` with `mips` levels, filled from `data` (level after level,

@@ -4,13 +4,11 @@
 use std::sync::Arc;
 
 use radiant_render::graph::{RenderGraph, TextureDesc, TextureHandle};
-use radiant_render::util::{
-    buffer_entry, fullscreen_pipeline, texture_entry, uniform_entry, view_entry,
-};
+use radiant_render::pass::{FullscreenEffect, Slot};
 use radiant_render::{COMMON_WGSL, RenderError};
 use wgpu::util::DeviceExt;
 
-use crate::blur::{BlurPipeline, GaussianBlur, blur_1d};
+use crate::blur::{BlurPipeline, GaussianBlur, blur_1d_pass};
 
 /// The shader source (with the shared prelude).
 pub fn shader_source() -> String {
@@ -135,56 +133,32 @@ impl Bloom {
     }
 }
 
-/// The bloom pipelines.
+/// The bloom pipelines: one effect whose entry points are the stages, all writing
+/// [`BLOOM_FORMAT`], and the blur for the lecture's method.
 pub struct BloomPipeline {
-    layout: wgpu::BindGroupLayout,
+    effect: FullscreenEffect,
     sampler: wgpu::Sampler,
-    down_first: wgpu::RenderPipeline,
-    down: wgpu::RenderPipeline,
-    up: wgpu::RenderPipeline,
-    bright: wgpu::RenderPipeline,
-    composite: wgpu::RenderPipeline,
     blur: Arc<BlurPipeline>,
 }
 
 impl BloomPipeline {
-    /// Compiles the pipelines (all render to Rgba16Float).
+    /// Declares the bindings (two textures, a bilinear sampler, the settings).
     pub fn new(device: &wgpu::Device, blur: Arc<BlurPipeline>) -> Self {
-        let float = wgpu::TextureSampleType::Float { filterable: true };
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("bloom_layout"),
-            entries: &[
-                texture_entry(0, float),
-                texture_entry(1, float),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
-                uniform_entry(3, wgpu::ShaderStages::FRAGMENT),
-            ],
-        });
-        let src = shader_source();
-        let make = |label, entry| {
-            fullscreen_pipeline(device, label, &src, entry, &layout, BLOOM_FORMAT, None)
-        };
+        let float = Slot::Texture(wgpu::TextureSampleType::Float { filterable: true });
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("bloom_sampler"),
             mag_filter: wgpu::FilterMode::Linear,
             min_filter: wgpu::FilterMode::Linear,
             ..Default::default()
         });
+        let filtering = Slot::Sampler(wgpu::SamplerBindingType::Filtering);
         Self {
-            down_first: make(
-                "bloom_downsample_first_pipeline",
-                "bloom_downsample_first_fs",
+            effect: FullscreenEffect::new(
+                device,
+                "bloom",
+                shader_source(),
+                &[float, float, filtering, Slot::Uniform],
             ),
-            down: make("bloom_downsample_pipeline", "bloom_downsample_fs"),
-            up: make("bloom_upsample_pipeline", "bloom_upsample_fs"),
-            bright: make("bloom_bright_pipeline", "bloom_bright_fs"),
-            composite: make("bloom_composite_pipeline", "bloom_composite_fs"),
-            layout,
             sampler,
             blur,
         }
@@ -232,55 +206,95 @@ const GAUSS_V: [&str; 8] = [
     "bloom_gaussian_v_7",
 ];
 
-#[derive(Clone, Copy)]
-enum Stage {
-    DownFirst,
-    Down,
-    Up,
-    Bright,
-    Composite,
+/// One bloom frame's passes: the pipeline, the shared settings and the half-size description.
+struct Stages<'a> {
+    pipeline: &'a BloomPipeline,
+    uniform: wgpu::Buffer,
+    full: TextureDesc,
 }
 
-/// Adds one bloom pass reading `a` (and `b`) into `out`.
-#[expect(
-    clippy::too_many_arguments,
-    reason = "a pass over explicit graph handles"
-)]
-fn bloom_stage(
-    graph: &mut RenderGraph,
-    name: &'static str,
-    stage: Stage,
-    a: TextureHandle,
-    b: Option<TextureHandle>,
-    out: TextureHandle,
-    uniform: &Arc<wgpu::Buffer>,
-    pipeline: &Arc<BloomPipeline>,
-) {
-    let reads: Vec<TextureHandle> = std::iter::once(a).chain(b).collect();
-    let (p, u) = (pipeline.clone(), uniform.clone());
-    graph.add_pass(name, &reads, &[out], move |ctx| {
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("bloom_bind_group"),
-            layout: &p.layout,
-            entries: &[
-                view_entry(0, ctx.view(a)),
-                view_entry(1, ctx.view(b.unwrap_or(a))),
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::Sampler(&p.sampler),
-                },
-                buffer_entry(3, &u),
-            ],
-        });
-        let rp = match stage {
-            Stage::DownFirst => &p.down_first,
-            Stage::Down => &p.down,
-            Stage::Up => &p.up,
-            Stage::Bright => &p.bright,
-            Stage::Composite => &p.composite,
-        };
-        radiant_render::util::draw_fullscreen(ctx.encoder, name, ctx.view(out), rp, &bind);
-    });
+impl Stages<'_> {
+    /// `(width, height) >> (k + 1)` in the bloom format.
+    fn half(&self, k: u32) -> TextureDesc {
+        TextureDesc::new(
+            (self.full.width >> (k + 1)).max(1),
+            (self.full.height >> (k + 1)).max(1),
+            BLOOM_FORMAT,
+        )
+    }
+
+    /// Pass `name` of fragment entry `entry` reading `a` (and `b`) into a new texture `texture`.
+    fn stage_pass(
+        &self,
+        graph: &mut RenderGraph,
+        (name, entry, texture): (&'static str, &'static str, &'static str),
+        (a, b): (TextureHandle, Option<TextureHandle>),
+        out: TextureDesc,
+    ) -> Result<TextureHandle, RenderError> {
+        let t = graph.create(texture, out);
+        self.pipeline
+            .effect
+            .pass(graph, name)
+            .read(a)
+            .read(b.unwrap_or(a))
+            .sampler(&self.pipeline.sampler)
+            .buffer(&self.uniform)
+            .draw(entry, t)?;
+        Ok(t)
+    }
+
+    /// Jimenez's chain: `n` 13-tap downsamples, then tent upsamples back to half size.
+    fn mip_chain_pass(
+        &self,
+        graph: &mut RenderGraph,
+        hdr: TextureHandle,
+        n: u32,
+    ) -> Result<TextureHandle, RenderError> {
+        let mut down: Vec<TextureHandle> = Vec::new();
+        for k in 0..n {
+            let (entry, src) = match down.last() {
+                None => ("bloom_downsample_first_fs", hdr),
+                Some(&prev) => ("bloom_downsample_fs", prev),
+            };
+            let name = (DOWN[k as usize], entry, "bloom_mip");
+            let t = self.stage_pass(graph, name, (src, None), self.half(k))?;
+            down.push(t);
+        }
+        let mut wider = down[n as usize - 1];
+        for k in (0..n - 1).rev() {
+            let own = down[k as usize];
+            let name = (UP[k as usize], "bloom_upsample_fs", "bloom_up");
+            wider = self.stage_pass(graph, name, (own, Some(wider)), self.half(k))?;
+        }
+        Ok(wider)
+    }
+
+    /// The lecture's: a half-size bright pass, then `rounds` of a separable 9-tap Gaussian.
+    fn gaussian_pass(
+        &self,
+        graph: &mut RenderGraph,
+        hdr: TextureHandle,
+        rounds: usize,
+    ) -> Result<TextureHandle, RenderError> {
+        let half = self.half(0);
+        let name = ("bloom_bright_pass", "bloom_bright_fs", "bloom_bright");
+        let mut cur = self.stage_pass(graph, name, (hdr, None), half)?;
+        let weights = GaussianBlur {
+            sigma: 2.0,
+            taps: 9,
+            passes: 1,
+        }
+        .weights();
+        let blur = &self.pipeline.blur;
+        for r in 0..rounds {
+            let h = graph.create("bloom_gaussian_h", half);
+            blur_1d_pass(graph, GAUSS_H[r], (cur, h), &weights, [1, 0], blur)?;
+            let v = graph.create("bloom_gaussian_v", half);
+            blur_1d_pass(graph, GAUSS_V[r], (h, v), &weights, [0, 1], blur)?;
+            cur = v;
+        }
+        Ok(cur)
+    }
 }
 
 /// Adds the bloom passes on `hdr`; returns the composited HDR image.
@@ -288,134 +302,45 @@ pub fn bloom_pass(
     graph: &mut RenderGraph,
     hdr: TextureHandle,
     settings: &Bloom,
-    pipeline: &Arc<BloomPipeline>,
-    device: &wgpu::Device,
-) -> TextureHandle {
-    let d = graph.desc(hdr);
-    let half = |k: u32| {
-        TextureDesc::new(
-            (d.width >> (k + 1)).max(1),
-            (d.height >> (k + 1)).max(1),
-            BLOOM_FORMAT,
-        )
-    };
-    let uniform = Arc::new(
-        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+    pipeline: &BloomPipeline,
+) -> Result<TextureHandle, RenderError> {
+    let uniform = [
+        settings.threshold.to_bits(),
+        settings.knee.to_bits(),
+        settings.intensity.to_bits(),
+        settings.scatter.to_bits(),
+        u32::from(settings.composite == BloomComposite::Additive),
+        0,
+        0,
+        0,
+    ];
+    let uniform = pipeline
+        .effect
+        .device()
+        .create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("bloom_settings"),
-            contents: bytemuck::cast_slice(&[
-                settings.threshold.to_bits(),
-                settings.knee.to_bits(),
-                settings.intensity.to_bits(),
-                settings.scatter.to_bits(),
-                u32::from(settings.composite == BloomComposite::Additive),
-                0,
-                0,
-                0,
-            ]),
+            contents: bytemuck::cast_slice(&uniform),
             usage: wgpu::BufferUsages::UNIFORM,
-        }),
-    );
+        });
+    let full = graph.desc(hdr);
+    let stages = Stages {
+        pipeline,
+        uniform,
+        full,
+    };
     let blurred = match settings.method {
         BloomMethod::MipChain => {
-            let n = settings.mip_count.clamp(1, MAX_MIPS);
-            let mut down = Vec::new();
-            for k in 0..n {
-                let t = graph.create("bloom_mip", half(k));
-                let (stage, src) = if k == 0 {
-                    (Stage::DownFirst, hdr)
-                } else {
-                    (Stage::Down, down[k as usize - 1])
-                };
-                bloom_stage(
-                    graph,
-                    DOWN[k as usize],
-                    stage,
-                    src,
-                    None,
-                    t,
-                    &uniform,
-                    pipeline,
-                );
-                down.push(t);
-            }
-            let mut wider = down[n as usize - 1];
-            for k in (0..n - 1).rev() {
-                let t = graph.create("bloom_up", half(k));
-                let own = down[k as usize];
-                bloom_stage(
-                    graph,
-                    UP[k as usize],
-                    Stage::Up,
-                    own,
-                    Some(wider),
-                    t,
-                    &uniform,
-                    pipeline,
-                );
-                wider = t;
-            }
-            wider
+            stages.mip_chain_pass(graph, hdr, settings.mip_count.clamp(1, MAX_MIPS))?
         }
         BloomMethod::Gaussian => {
-            let bright = graph.create("bloom_bright", half(0));
-            bloom_stage(
-                graph,
-                "bloom_bright_pass",
-                Stage::Bright,
-                hdr,
-                None,
-                bright,
-                &uniform,
-                pipeline,
-            );
-            let weights = GaussianBlur {
-                sigma: 2.0,
-                taps: 9,
-                passes: 1,
-            }
-            .weights();
-            let mut cur = bright;
-            for r in 0..settings.gaussian_rounds.clamp(1, 8) as usize {
-                let h = graph.create("bloom_gaussian_h", half(0));
-                blur_1d(
-                    graph,
-                    GAUSS_H[r],
-                    cur,
-                    h,
-                    &weights,
-                    [1, 0],
-                    &pipeline.blur,
-                    device,
-                );
-                let v = graph.create("bloom_gaussian_v", half(0));
-                blur_1d(
-                    graph,
-                    GAUSS_V[r],
-                    h,
-                    v,
-                    &weights,
-                    [0, 1],
-                    &pipeline.blur,
-                    device,
-                );
-                cur = v;
-            }
-            cur
+            stages.gaussian_pass(graph, hdr, settings.gaussian_rounds.clamp(1, 8) as usize)?
         }
     };
-    let out = graph.create(
-        "bloom_composite",
-        TextureDesc::new(d.width, d.height, BLOOM_FORMAT),
-    );
-    bloom_stage(
-        graph,
+    let out = TextureDesc::new(full.width, full.height, BLOOM_FORMAT);
+    let name = (
         "bloom_composite_pass",
-        Stage::Composite,
-        hdr,
-        Some(blurred),
-        out,
-        &uniform,
-        pipeline,
+        "bloom_composite_fs",
+        "bloom_composite",
     );
-    out
+    stages.stage_pass(graph, name, (hdr, Some(blurred)), out)
 }

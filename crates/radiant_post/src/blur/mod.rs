@@ -1,13 +1,8 @@
 //! Separable Gaussian blur as a post node (sigma, taps, passes).
 
-use std::sync::Arc;
-
 use radiant_render::graph::{RenderGraph, TextureDesc, TextureHandle};
-use radiant_render::util::{
-    PipelinesByFormat, buffer_entry, fullscreen_pipeline, texture_entry, uniform_entry, view_entry,
-};
+use radiant_render::pass::{FullscreenEffect, Slot, UNFILTERABLE};
 use radiant_render::{COMMON_WGSL, RenderError};
-use wgpu::util::DeviceExt;
 
 /// The shader source (with the shared prelude).
 pub fn shader_source() -> String {
@@ -76,25 +71,17 @@ impl GaussianBlur {
 }
 
 /// The blur pipelines (one per format).
-pub struct BlurPipeline {
-    layout: wgpu::BindGroupLayout,
-    pipelines: PipelinesByFormat,
-}
+pub struct BlurPipeline(FullscreenEffect);
 
 impl BlurPipeline {
-    /// Creates the layout.
+    /// Declares the bindings; pipelines compile on first use per format.
     pub fn new(device: &wgpu::Device) -> Self {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("blur_layout"),
-            entries: &[
-                texture_entry(0, wgpu::TextureSampleType::Float { filterable: false }),
-                uniform_entry(1, wgpu::ShaderStages::FRAGMENT),
-            ],
-        });
-        Self {
-            layout,
-            pipelines: PipelinesByFormat::default(),
-        }
+        Self(FullscreenEffect::new(
+            device,
+            "blur",
+            shader_source(),
+            &[Slot::Texture(UNFILTERABLE), Slot::Uniform],
+        ))
     }
 }
 
@@ -127,64 +114,37 @@ const NAMES_V: [&str; 8] = [
 ];
 
 /// One 1D blur pass from `input` into `output` along `dir`.
-#[expect(
-    clippy::too_many_arguments,
-    reason = "a pass over explicit graph handles"
-)]
-pub fn blur_1d(
+pub fn blur_1d_pass(
     graph: &mut RenderGraph,
     name: &'static str,
-    input: TextureHandle,
-    output: TextureHandle,
+    (input, output): (TextureHandle, TextureHandle),
     weights: &[f32],
     dir: [i32; 2],
-    pipeline: &Arc<BlurPipeline>,
-    device: &wgpu::Device,
-) {
-    let format = graph.desc(output).format;
-    let layout = &pipeline.layout;
-    let rp = pipeline.pipelines.get(format, || {
-        fullscreen_pipeline(
-            device,
-            "blur_pipeline",
-            &shader_source(),
-            "blur_fs",
-            layout,
-            format,
-            None,
-        )
-    });
+    pipeline: &BlurPipeline,
+) -> Result<(), RenderError> {
     let mut w = [0.0f32; 64];
     let n = weights.len().min(64);
     w[..n].copy_from_slice(&weights[..n]);
-    let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("blur_settings"),
-        contents: bytemuck::bytes_of(&BlurUniform {
-            weights: w,
-            params: [n as i32 - 1, dir[0], dir[1], 0],
-        }),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let p = pipeline.clone();
-    graph.add_pass(name, &[input], &[output], move |ctx| {
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("blur_bind_group"),
-            layout: &p.layout,
-            entries: &[view_entry(0, ctx.view(input)), buffer_entry(1, &uniform)],
-        });
-        radiant_render::util::draw_fullscreen(ctx.encoder, name, ctx.view(output), &rp, &bind);
-    });
+    let uniform = BlurUniform {
+        weights: w,
+        params: [n as i32 - 1, dir[0], dir[1], 0],
+    };
+    pipeline
+        .0
+        .pass(graph, name)
+        .read(input)
+        .uniform(bytemuck::bytes_of(&uniform))
+        .draw("blur_fs", output)
 }
 
 /// Adds the blur passes; writes into `output` if given, else a new texture like `input`.
-pub fn gaussian_blur(
+pub fn blur_pass(
     graph: &mut RenderGraph,
     input: TextureHandle,
     settings: &GaussianBlur,
     output: Option<TextureHandle>,
-    pipeline: &Arc<BlurPipeline>,
-    device: &wgpu::Device,
-) -> TextureHandle {
+    pipeline: &BlurPipeline,
+) -> Result<TextureHandle, RenderError> {
     let desc = graph.desc(input);
     let scratch = TextureDesc::new(desc.width, desc.height, desc.format);
     let weights = settings.weights();
@@ -192,32 +152,21 @@ pub fn gaussian_blur(
     let mut current = input;
     for round in 0..passes {
         let h = graph.create("blur_h", scratch);
-        blur_1d(
+        blur_1d_pass(
             graph,
             NAMES_H[round],
-            current,
-            h,
+            (current, h),
             &weights,
             [1, 0],
             pipeline,
-            device,
-        );
+        )?;
         let last = round + 1 == passes;
         let v = match output {
             Some(o) if last => o,
             _ => graph.create("blur_v", scratch),
         };
-        blur_1d(
-            graph,
-            NAMES_V[round],
-            h,
-            v,
-            &weights,
-            [0, 1],
-            pipeline,
-            device,
-        );
+        blur_1d_pass(graph, NAMES_V[round], (h, v), &weights, [0, 1], pipeline)?;
         current = v;
     }
-    current
+    Ok(current)
 }

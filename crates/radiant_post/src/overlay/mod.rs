@@ -9,8 +9,8 @@
 use std::sync::Arc;
 
 use radiant_render::graph::{RenderGraph, TextureHandle};
-use radiant_render::util::{PipelinesByFormat, fullscreen_pipeline, texture_entry, view_entry};
-use radiant_render::{COMMON_WGSL, wgpu};
+use radiant_render::pass::{FullscreenEffect, Slot, UNFILTERABLE};
+use radiant_render::{COMMON_WGSL, RenderError, wgpu};
 
 /// Something that draws over the finished frame. It is called from the graph's last pass, so
 /// it must hold its per-frame data behind interior mutability (set it before rendering).
@@ -28,25 +28,17 @@ pub trait Overlay: Send + Sync {
 }
 
 /// The overlay pass's copy pipeline.
-pub struct OverlayPipeline {
-    layout: wgpu::BindGroupLayout,
-    pipelines: PipelinesByFormat,
-}
+pub struct OverlayPipeline(FullscreenEffect);
 
 impl OverlayPipeline {
-    /// Creates the bind-group layout; pipelines are made per target format on first use.
+    /// Declares the bindings; pipelines are made per target format on first use.
     pub fn new(device: &wgpu::Device) -> Self {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("overlay_layout"),
-            entries: &[texture_entry(
-                0,
-                wgpu::TextureSampleType::Float { filterable: false },
-            )],
-        });
-        Self {
-            layout,
-            pipelines: PipelinesByFormat::default(),
-        }
+        Self(FullscreenEffect::new(
+            device,
+            "overlay_copy",
+            shader_source(),
+            &[Slot::Texture(UNFILTERABLE)],
+        ))
     }
 }
 
@@ -55,49 +47,34 @@ pub fn shader_source() -> String {
     format!("{COMMON_WGSL}{}", include_str!("overlay.wgsl"))
 }
 
-/// Adds the pass that copies `frame` into `target` and then lets `overlay` draw over it.
+/// Adds the pass that copies `frame` into `target` and then lets `overlay` draw over it;
+/// returns `target`.
 pub fn overlay_pass(
     graph: &mut RenderGraph,
     frame: TextureHandle,
     target: TextureHandle,
     overlay: Arc<dyn Overlay>,
-    pipeline: &Arc<OverlayPipeline>,
-    device: &wgpu::Device,
-) {
+    pipeline: &OverlayPipeline,
+) -> Result<TextureHandle, RenderError> {
     let desc = graph.desc(target);
-    let layout = &pipeline.layout;
     // A linear-format target (egui blends correctly only there) gets sRGB-encoded values.
     let entry = if desc.format.is_srgb() {
         "overlay_copy_fs"
     } else {
         "overlay_copy_encode_fs"
     };
-    let rp = pipeline.pipelines.get(desc.format, || {
-        fullscreen_pipeline(
-            device,
-            "overlay_copy_pipeline",
-            &shader_source(),
-            entry,
-            layout,
-            desc.format,
-            None,
-        )
-    });
-    let p = pipeline.clone();
     let size = (desc.width, desc.height);
-    graph.add_pass("overlay_pass", &[frame], &[target], move |ctx| {
+    let record = move |ctx: &mut radiant_render::graph::PassContext<'_>,
+                       rp: &wgpu::RenderPipeline,
+                       bind: &wgpu::BindGroup,
+                       view: &wgpu::TextureView| {
         overlay.prepare(ctx.device, ctx.queue, ctx.encoder, size);
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("overlay_bind_group"),
-            layout: &p.layout,
-            entries: &[view_entry(0, ctx.view(frame))],
-        });
         let mut pass = ctx
             .encoder
             .begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("overlay_pass"),
                 color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: ctx.view(target),
+                    view,
                     depth_slice: None,
                     resolve_target: None,
                     ops: wgpu::Operations {
@@ -111,9 +88,16 @@ pub fn overlay_pass(
                 multiview_mask: None,
             })
             .forget_lifetime();
-        pass.set_pipeline(&rp);
-        pass.set_bind_group(0, &bind, &[]);
+        pass.set_pipeline(rp);
+        pass.set_bind_group(0, bind, &[]);
         pass.draw(0..3, 0..1);
         overlay.draw(&mut pass, size);
-    });
+        Ok(())
+    };
+    pipeline
+        .0
+        .pass(graph, "overlay_pass")
+        .read(frame)
+        .raster(entry, target, record)?;
+    Ok(target)
 }

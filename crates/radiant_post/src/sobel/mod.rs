@@ -1,13 +1,8 @@
 //! Sobel edge detection as a post node, on colour, depth or normals.
 
-use std::sync::Arc;
-
 use radiant_render::graph::{RenderGraph, TextureDesc, TextureHandle};
-use radiant_render::util::{
-    PipelinesByFormat, buffer_entry, fullscreen_pipeline, texture_entry, uniform_entry, view_entry,
-};
+use radiant_render::pass::{FullscreenEffect, Slot, UNFILTERABLE};
 use radiant_render::{COMMON_WGSL, RenderError};
-use wgpu::util::DeviceExt;
 
 /// The shader source (with the shared prelude).
 pub fn shader_source() -> String {
@@ -70,37 +65,25 @@ impl Sobel {
     }
 }
 
-/// The Sobel pipelines (per source and format).
+/// The Sobel pipelines: one effect per source, as each entry point binds its own textures
+/// (the colour at 0, the normal at 1, the depth at 2, the settings at 3).
 pub struct SobelPipeline {
-    layouts: [wgpu::BindGroupLayout; 3],
-    pipelines: [PipelinesByFormat; 3],
+    color: FullscreenEffect,
+    depth: FullscreenEffect,
+    normal: FullscreenEffect,
 }
 
 impl SobelPipeline {
-    /// Creates the layouts.
+    /// Declares the bindings; pipelines compile on first use per format.
     pub fn new(device: &wgpu::Device) -> Self {
-        let float = wgpu::TextureSampleType::Float { filterable: false };
-        let make = |label, extra: Option<wgpu::BindGroupLayoutEntry>| {
-            let mut entries = vec![
-                texture_entry(0, float),
-                uniform_entry(3, wgpu::ShaderStages::FRAGMENT),
-            ];
-            entries.extend(extra);
-            device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some(label),
-                entries: &entries,
-            })
-        };
+        let (tex, no) = (Slot::Texture(UNFILTERABLE), Slot::Unused);
+        let depth = Slot::Texture(wgpu::TextureSampleType::Depth);
+        let make =
+            |label, slots: &[Slot]| FullscreenEffect::new(device, label, shader_source(), slots);
         Self {
-            layouts: [
-                make("sobel_color_layout", None),
-                make(
-                    "sobel_depth_layout",
-                    Some(texture_entry(2, wgpu::TextureSampleType::Depth)),
-                ),
-                make("sobel_normal_layout", Some(texture_entry(1, float))),
-            ],
-            pipelines: Default::default(),
+            color: make("sobel_color", &[tex, no, no, Slot::Uniform]),
+            depth: make("sobel_depth", &[tex, no, depth, Slot::Uniform]),
+            normal: make("sobel_normal", &[tex, tex, no, Slot::Uniform]),
         }
     }
 }
@@ -124,8 +107,7 @@ pub fn sobel_pass(
     inputs: SobelInputs,
     settings: &Sobel,
     output: Option<TextureHandle>,
-    pipeline: &Arc<SobelPipeline>,
-    device: &wgpu::Device,
+    pipeline: &SobelPipeline,
 ) -> Result<TextureHandle, RenderError> {
     let desc = graph.desc(inputs.color);
     let out = output.unwrap_or_else(|| {
@@ -134,60 +116,39 @@ pub fn sobel_pass(
             TextureDesc::new(desc.width, desc.height, desc.format),
         )
     });
-    let (index, entry, aux) = match settings.source {
-        EdgeSource::Color => (0, "sobel_color_fs", None),
-        EdgeSource::Depth => (1, "sobel_depth_fs", inputs.depth.map(|h| (2, h))),
-        EdgeSource::Normal => (2, "sobel_normal_fs", inputs.normal.map(|h| (1, h))),
+    let missing = |input| RenderError::MissingInput {
+        pass: "sobel_pass",
+        input,
     };
-    if index != 0 && aux.is_none() {
-        return Err(RenderError::Graph(format!(
-            "Sobel on {:?} needs that G-buffer texture",
-            settings.source
-        )));
-    }
-    let format = graph.desc(out).format;
-    let layout = &pipeline.layouts[index];
-    let rp = pipeline.pipelines[index].get(format, || {
-        fullscreen_pipeline(
-            device,
-            "sobel_pipeline",
-            &shader_source(),
-            entry,
-            layout,
-            format,
-            None,
-        )
-    });
+    let (effect, entry, aux) = match settings.source {
+        EdgeSource::Color => (&pipeline.color, "sobel_color_fs", None),
+        EdgeSource::Depth => (
+            &pipeline.depth,
+            "sobel_depth_fs",
+            Some(inputs.depth.ok_or(missing("depth"))?),
+        ),
+        EdgeSource::Normal => (
+            &pipeline.normal,
+            "sobel_normal_fs",
+            Some(inputs.normal.ok_or(missing("normal"))?),
+        ),
+    };
     let c = settings.edge_color;
-    let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("sobel_settings"),
-        contents: bytemuck::cast_slice(&[
-            c[0],
-            c[1],
-            c[2],
-            1.0,
-            settings.threshold,
-            inputs.near_far[0],
-            inputs.near_far[1],
-            0.0,
-        ]),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let mut reads = vec![inputs.color];
-    reads.extend(aux.map(|(_, h)| h));
-    let p = pipeline.clone();
-    let color = inputs.color;
-    graph.add_pass("sobel_pass", &reads, &[out], move |ctx| {
-        let mut entries = vec![view_entry(0, ctx.view(color)), buffer_entry(3, &uniform)];
-        if let Some((b, h)) = aux {
-            entries.push(view_entry(b, ctx.view(h)));
-        }
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("sobel_bind_group"),
-            layout: &p.layouts[index],
-            entries: &entries,
-        });
-        radiant_render::util::draw_fullscreen(ctx.encoder, "sobel_pass", ctx.view(out), &rp, &bind);
-    });
+    let uniform = [
+        c[0],
+        c[1],
+        c[2],
+        1.0,
+        settings.threshold,
+        inputs.near_far[0],
+        inputs.near_far[1],
+        0.0,
+    ];
+    let mut pass = effect.pass(graph, "sobel_pass").read(inputs.color);
+    if let Some(aux) = aux {
+        pass = pass.read(aux);
+    }
+    pass.uniform(bytemuck::cast_slice(&uniform))
+        .draw(entry, out)?;
     Ok(out)
 }

@@ -1,14 +1,9 @@
 //! Tone mapping with exposure, into an sRGB (display-encoded) target.
 
-use std::sync::Arc;
-
 use radiant_color::Tonemap;
 use radiant_render::graph::{RenderGraph, TextureHandle};
-use radiant_render::util::{
-    PipelinesByFormat, buffer_entry, fullscreen_pipeline, texture_entry, uniform_entry, view_entry,
-};
+use radiant_render::pass::{FullscreenEffect, Slot, UNFILTERABLE};
 use radiant_render::{COMMON_WGSL, RenderError};
-use wgpu::util::DeviceExt;
 
 /// The shader source (with the shared prelude).
 pub fn shader_source() -> String {
@@ -71,68 +66,34 @@ impl Tonemapping {
 }
 
 /// The tone-mapping pipelines (one per target format).
-pub struct TonemappingPipeline {
-    layout: wgpu::BindGroupLayout,
-    pipelines: PipelinesByFormat,
-}
+pub struct TonemappingPipeline(FullscreenEffect);
 
 impl TonemappingPipeline {
-    /// Creates the layout; pipelines compile on first use per format.
+    /// Declares the bindings; pipelines compile on first use per format.
     pub fn new(device: &wgpu::Device) -> Self {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("tonemapping_layout"),
-            entries: &[
-                texture_entry(0, wgpu::TextureSampleType::Float { filterable: false }),
-                uniform_entry(1, wgpu::ShaderStages::FRAGMENT),
-            ],
-        });
-        Self {
-            layout,
-            pipelines: PipelinesByFormat::default(),
-        }
+        Self(FullscreenEffect::new(
+            device,
+            "tonemapping",
+            shader_source(),
+            &[Slot::Texture(UNFILTERABLE), Slot::Uniform],
+        ))
     }
 }
 
-/// Adds the tone-mapping pass from `hdr` into `target` (an sRGB format encodes on store).
+/// Adds the tone-mapping pass from `hdr` into `target` (an sRGB format encodes on store);
+/// returns `target`.
 pub fn tonemapping_pass(
     graph: &mut RenderGraph,
     hdr: TextureHandle,
     target: TextureHandle,
     settings: &Tonemapping,
-    pipeline: &Arc<TonemappingPipeline>,
-    device: &wgpu::Device,
-) {
-    let format = graph.desc(target).format;
-    let layout = &pipeline.layout;
-    let rp = pipeline.pipelines.get(format, || {
-        fullscreen_pipeline(
-            device,
-            "tonemapping_pipeline",
-            &shader_source(),
-            "tonemapping_fs",
-            layout,
-            format,
-            None,
-        )
-    });
-    let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("tonemapping_settings"),
-        contents: bytemuck::cast_slice(&settings.uniform()),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let p = pipeline.clone();
-    graph.add_pass("tonemapping_pass", &[hdr], &[target], move |ctx| {
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("tonemapping_bind_group"),
-            layout: &p.layout,
-            entries: &[view_entry(0, ctx.view(hdr)), buffer_entry(1, &uniform)],
-        });
-        radiant_render::util::draw_fullscreen(
-            ctx.encoder,
-            "tonemapping_pass",
-            ctx.view(target),
-            &rp,
-            &bind,
-        );
-    });
+    pipeline: &TonemappingPipeline,
+) -> Result<TextureHandle, RenderError> {
+    pipeline
+        .0
+        .pass(graph, "tonemapping_pass")
+        .read(hdr)
+        .uniform(bytemuck::cast_slice(&settings.uniform()))
+        .draw("tonemapping_fs", target)?;
+    Ok(target)
 }

@@ -3,6 +3,7 @@
 use std::sync::Arc;
 
 use crate::graph::{RenderGraph, TextureDesc, TextureHandle};
+use crate::pass::{Bind, BindLayout, Slot};
 use crate::scene::{GpuScene, InstanceData, Vertex};
 
 /// Albedo, Rgba8Unorm (linear reflectance).
@@ -40,8 +41,8 @@ pub struct GBuffer {
 
 /// The G-buffer pipeline and its bind-group layout.
 pub struct GBufferPipeline {
-    layout: wgpu::BindGroupLayout,
-    material_layout: wgpu::BindGroupLayout,
+    layout: Arc<BindLayout>,
+    material_layout: Arc<BindLayout>,
     pipeline: wgpu::RenderPipeline,
 }
 
@@ -52,45 +53,31 @@ impl GBufferPipeline {
             label: Some("gbuffer_shader"),
             source: wgpu::ShaderSource::Wgsl(shader_source().into()),
         });
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("gbuffer_layout"),
-            entries: &[
-                crate::util::uniform_entry(0, wgpu::ShaderStages::VERTEX_FRAGMENT),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
-                crate::util::storage_entry(3, wgpu::ShaderStages::VERTEX),
+        let filterable = wgpu::TextureSampleType::Float { filterable: true };
+        let filtering = Slot::Sampler(wgpu::SamplerBindingType::Filtering);
+        let stages = wgpu::ShaderStages::VERTEX_FRAGMENT;
+        let layout = Arc::new(BindLayout::new(
+            device,
+            "gbuffer",
+            stages,
+            // Camera, light-map pages, their sampler, per-instance light-map placement.
+            &[
+                Slot::Uniform,
+                Slot::TextureArray(filterable),
+                filtering,
+                Slot::Storage,
             ],
-        });
-        let material_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("gbuffer_material_layout"),
-            entries: &[
-                crate::util::texture_entry(0, wgpu::TextureSampleType::Float { filterable: true }),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
-                crate::util::uniform_entry(2, wgpu::ShaderStages::FRAGMENT),
-            ],
-        });
+        ));
+        let material_layout = Arc::new(BindLayout::new(
+            device,
+            "gbuffer_material",
+            stages,
+            // Base-colour texture, its sampler, the material's factors.
+            &[Slot::Texture(filterable), filtering, Slot::Uniform],
+        ));
         let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("gbuffer_pipeline_layout"),
-            bind_group_layouts: &[Some(&layout), Some(&material_layout)],
+            bind_group_layouts: &[Some(layout.layout()), Some(material_layout.layout())],
             immediate_size: 0,
         });
         let attributes = wgpu::vertex_attr_array![
@@ -163,119 +150,77 @@ impl GBufferPipeline {
     }
 }
 
+/// The G-buffer's textures of a `width` × `height` frame.
+fn gbuffer_textures(graph: &mut RenderGraph, width: u32, height: u32) -> GBuffer {
+    let mut create = |name, format| graph.create(name, TextureDesc::new(width, height, format));
+    GBuffer {
+        albedo: create("gbuffer_albedo", ALBEDO_FORMAT),
+        normal: create("gbuffer_normal", NORMAL_FORMAT),
+        material: create("gbuffer_material", MATERIAL_FORMAT),
+        irradiance: create("gbuffer_irradiance", HDR_FORMAT),
+        emissive: create("gbuffer_emissive", HDR_FORMAT),
+        depth: create("gbuffer_depth", DEPTH_FORMAT),
+    }
+}
+
 /// Adds the G-buffer pass; returns its textures.
 pub fn gbuffer_pass(
     graph: &mut RenderGraph,
-    width: u32,
-    height: u32,
-    pipeline: Arc<GBufferPipeline>,
-    scene: Arc<GpuScene>,
-) -> GBuffer {
-    let g = GBuffer {
-        albedo: graph.create(
-            "gbuffer_albedo",
-            TextureDesc::new(width, height, ALBEDO_FORMAT),
-        ),
-        normal: graph.create(
-            "gbuffer_normal",
-            TextureDesc::new(width, height, NORMAL_FORMAT),
-        ),
-        material: graph.create(
-            "gbuffer_material",
-            TextureDesc::new(width, height, MATERIAL_FORMAT),
-        ),
-        irradiance: graph.create(
-            "gbuffer_irradiance",
-            TextureDesc::new(width, height, HDR_FORMAT),
-        ),
-        emissive: graph.create(
-            "gbuffer_emissive",
-            TextureDesc::new(width, height, HDR_FORMAT),
-        ),
-        depth: graph.create(
-            "gbuffer_depth",
-            TextureDesc::new(width, height, DEPTH_FORMAT),
-        ),
-    };
-    let writes = [
-        g.albedo,
-        g.normal,
-        g.material,
-        g.irradiance,
-        g.emissive,
-        g.depth,
-    ];
-    graph.add_pass("gbuffer_pass", &[], &writes, move |ctx| {
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("gbuffer_bind_group"),
-            layout: &pipeline.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: scene.camera.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&scene.lightmap),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::Sampler(&scene.linear_sampler),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: scene.instance_uvs.as_entire_binding(),
-                },
-            ],
-        });
-        let materials: Vec<wgpu::BindGroup> = scene
-            .materials
+    (width, height): (u32, u32),
+    scene: &Arc<GpuScene>,
+    pipeline: &GBufferPipeline,
+) -> Result<GBuffer, crate::RenderError> {
+    let g = gbuffer_textures(graph, width, height);
+    let mut pass = graph.add_pass("gbuffer_pass");
+    let colors = [g.albedo, g.normal, g.material, g.irradiance, g.emissive].map(|h| pass.write(h));
+    let depth = pass.write(g.depth);
+    let frame = pipeline.layout.bind(
+        &mut pass,
+        vec![
+            Bind::Buffer(scene.camera.clone()),
+            Bind::View(scene.lightmap.clone()),
+            Bind::Sampler(scene.linear_sampler.clone()),
+            Bind::Buffer(scene.instance_uvs.clone()),
+        ],
+    )?;
+    let materials = scene
+        .materials
+        .iter()
+        .map(|m| {
+            pipeline.material_layout.bind(
+                &mut pass,
+                vec![
+                    Bind::View(m.texture.clone()),
+                    Bind::Sampler(m.sampler.clone()),
+                    Bind::Buffer(m.uniform.clone()),
+                ],
+            )
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let (scene, rp) = (scene.clone(), pipeline.pipeline.clone());
+    pass.render(move |ctx| {
+        let frame = frame.create(ctx)?;
+        let materials = materials
             .iter()
-            .map(|m| {
-                ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("gbuffer_material"),
-                    layout: &pipeline.material_layout,
-                    entries: &[
-                        wgpu::BindGroupEntry {
-                            binding: 0,
-                            resource: wgpu::BindingResource::TextureView(&m.texture),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 1,
-                            resource: wgpu::BindingResource::Sampler(&m.sampler),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: m.uniform.as_entire_binding(),
-                        },
-                    ],
-                })
-            })
-            .collect();
-        let color = |h| {
-            Some(wgpu::RenderPassColorAttachment {
-                view: ctx.view(h),
+            .map(|m| m.create(ctx))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut attachments = Vec::with_capacity(colors.len());
+        for c in colors {
+            attachments.push(Some(wgpu::RenderPassColorAttachment {
+                view: ctx.view(c)?,
                 depth_slice: None,
                 resolve_target: None,
                 ops: wgpu::Operations {
                     load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
                     store: wgpu::StoreOp::Store,
                 },
-            })
-        };
-        let attachments = [
-            color(g.albedo),
-            color(g.normal),
-            color(g.material),
-            color(g.irradiance),
-            color(g.emissive),
-        ];
-        let depth_view = ctx.view(g.depth);
-        let mut pass = ctx.encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            }));
+        }
+        let mut rpass = ctx.encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("gbuffer_pass"),
             color_attachments: &attachments,
             depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: depth_view,
+                view: ctx.view(depth)?,
                 depth_ops: Some(wgpu::Operations {
                     load: wgpu::LoadOp::Clear(1.0),
                     store: wgpu::StoreOp::Store,
@@ -286,14 +231,15 @@ pub fn gbuffer_pass(
             occlusion_query_set: None,
             multiview_mask: None,
         });
-        pass.set_pipeline(&pipeline.pipeline);
-        pass.set_bind_group(0, &bind, &[]);
-        pass.set_vertex_buffer(0, scene.vertices.slice(..));
-        pass.set_vertex_buffer(1, scene.instances.slice(..));
+        rpass.set_pipeline(&rp);
+        rpass.set_bind_group(0, &frame, &[]);
+        rpass.set_vertex_buffer(0, scene.vertices.slice(..));
+        rpass.set_vertex_buffer(1, scene.instances.slice(..));
         for (m, bind) in scene.materials.iter().zip(&materials) {
-            pass.set_bind_group(1, bind, &[]);
-            pass.draw(m.first..m.first + m.count, m.instances.clone());
+            rpass.set_bind_group(1, bind, &[]);
+            rpass.draw(m.first..m.first + m.count, m.instances.clone());
         }
+        Ok(())
     });
-    g
+    Ok(g)
 }

@@ -3,13 +3,12 @@
 
 use std::sync::Arc;
 
-use wgpu::util::DeviceExt;
-
+use crate::RenderError;
 use crate::context::Requirements;
 use crate::gbuffer::{GBuffer, HDR_FORMAT};
 use crate::graph::{RenderGraph, TextureDesc, TextureHandle};
+use crate::pass::{BindLayout, SimplePass, Slot, UNFILTERABLE};
 use crate::scene::GpuScene;
-use crate::util::{storage_entry, texture_entry, uniform_entry};
 
 /// The shader source (with the shared prelude).
 pub fn shader_source() -> String {
@@ -93,9 +92,10 @@ pub fn requirements() -> Requirements {
 
 /// The lighting compute pipeline.
 pub struct LightingPipeline {
-    layout: wgpu::BindGroupLayout,
+    layout: Arc<BindLayout>,
     pipeline: wgpu::ComputePipeline,
     white: wgpu::TextureView,
+    device: wgpu::Device,
 }
 
 impl LightingPipeline {
@@ -105,39 +105,31 @@ impl LightingPipeline {
             label: Some("lighting_shader"),
             source: wgpu::ShaderSource::Wgsl(shader_source().into()),
         });
-        let float = wgpu::TextureSampleType::Float { filterable: false };
-        let mut entries = vec![
-            uniform_entry(0, wgpu::ShaderStages::COMPUTE),
-            storage_entry(1, wgpu::ShaderStages::COMPUTE),
-        ];
-        for b in 2..=6 {
-            entries.push(texture_entry(b, float));
-        }
-        entries.push(texture_entry(7, wgpu::TextureSampleType::Depth));
-        entries.push(texture_entry(8, float));
-        entries.push(wgpu::BindGroupLayoutEntry {
-            binding: 9,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::StorageTexture {
-                access: wgpu::StorageTextureAccess::WriteOnly,
-                format: HDR_FORMAT,
-                view_dimension: wgpu::TextureViewDimension::D2,
-            },
-            count: None,
-        });
-        entries.push(uniform_entry(10, wgpu::ShaderStages::COMPUTE));
-        entries.push(uniform_entry(11, wgpu::ShaderStages::COMPUTE));
-        entries.push(texture_entry(12, float));
-        for e in &mut entries {
-            e.visibility = wgpu::ShaderStages::COMPUTE;
-        }
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("lighting_layout"),
-            entries: &entries,
-        });
+        let tex = Slot::Texture(UNFILTERABLE);
+        let depth = Slot::Texture(wgpu::TextureSampleType::Depth);
+        let layout = Arc::new(BindLayout::new(
+            device,
+            "lighting",
+            wgpu::ShaderStages::COMPUTE,
+            &[
+                Slot::Uniform,                    // camera
+                Slot::Storage,                    // lights
+                tex,                              // albedo
+                tex,                              // normal
+                tex,                              // material
+                tex,                              // irradiance
+                tex,                              // emissive
+                depth,                            // depth
+                tex,                              // ambient occlusion
+                Slot::StorageTexture(HDR_FORMAT), // lit radiance
+                Slot::Uniform,                    // settings
+                Slot::Uniform,                    // sky
+                tex,                              // sky image
+            ],
+        ));
         let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("lighting_pipeline_layout"),
-            bind_group_layouts: &[Some(&layout)],
+            bind_group_layouts: &[Some(layout.layout())],
             immediate_size: 0,
         });
         let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -160,6 +152,7 @@ impl LightingPipeline {
             layout,
             pipeline,
             white,
+            device: device.clone(),
         }
     }
 }
@@ -169,85 +162,42 @@ impl LightingPipeline {
 /// With `ao` = `None` no AO texture is read (the indirect term is unoccluded).
 pub fn lighting_pass(
     graph: &mut RenderGraph,
-    gbuffer: &GBuffer,
-    ao: Option<TextureHandle>,
+    (gbuffer, ao): (&GBuffer, Option<TextureHandle>),
+    scene: &GpuScene,
     debug_view: DebugView,
-    pipeline: Arc<LightingPipeline>,
-    scene: Arc<GpuScene>,
-    device: &wgpu::Device,
-) -> TextureHandle {
+    pipeline: &LightingPipeline,
+) -> Result<TextureHandle, RenderError> {
     let d = graph.desc(gbuffer.albedo);
     let out = graph.create(
         "lit_radiance",
         TextureDesc::storage(d.width, d.height, HDR_FORMAT),
     );
-    let settings = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("lighting_settings"),
-        contents: bytemuck::bytes_of(&SettingsUniform {
-            debug_view: debug_view.code(),
-            use_ao: u32::from(ao.is_some()),
-            pad: [0; 2],
-        }),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
+    let settings = SettingsUniform {
+        debug_view: debug_view.code(),
+        use_ao: u32::from(ao.is_some()),
+        pad: [0; 2],
+    };
     let g = *gbuffer;
-    let mut reads = vec![
-        g.albedo,
-        g.normal,
-        g.material,
-        g.irradiance,
-        g.emissive,
-        g.depth,
-    ];
-    reads.extend(ao);
-    graph.add_pass("lighting_pass", &reads, &[out], move |ctx| {
-        fn view(b: u32, v: &wgpu::TextureView) -> wgpu::BindGroupEntry<'_> {
-            wgpu::BindGroupEntry {
-                binding: b,
-                resource: wgpu::BindingResource::TextureView(v),
-            }
-        }
-        let ao_view = ao.map_or(&pipeline.white, |h| ctx.view(h));
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("lighting_bind_group"),
-            layout: &pipeline.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: scene.camera.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: scene.lights.as_entire_binding(),
-                },
-                view(2, ctx.view(g.albedo)),
-                view(3, ctx.view(g.normal)),
-                view(4, ctx.view(g.material)),
-                view(5, ctx.view(g.irradiance)),
-                view(6, ctx.view(g.emissive)),
-                view(7, ctx.view(g.depth)),
-                view(8, ao_view),
-                view(9, ctx.view(out)),
-                wgpu::BindGroupEntry {
-                    binding: 10,
-                    resource: settings.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 11,
-                    resource: scene.sky.as_entire_binding(),
-                },
-                view(12, &scene.sky_image),
-            ],
-        });
-        let mut pass = ctx
-            .encoder
-            .begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("lighting_pass"),
-                timestamp_writes: None,
-            });
-        pass.set_pipeline(&pipeline.pipeline);
-        pass.set_bind_group(0, &bind, &[]);
-        pass.dispatch_workgroups(d.width.div_ceil(16), d.height.div_ceil(16), 1);
-    });
-    out
+    let pass = SimplePass::new(graph, "lighting_pass", &pipeline.layout, &pipeline.device)
+        .buffer(&scene.camera)
+        .buffer(&scene.lights)
+        .read(g.albedo)
+        .read(g.normal)
+        .read(g.material)
+        .read(g.irradiance)
+        .read(g.emissive)
+        .read(g.depth);
+    let pass = match ao {
+        Some(ao) => pass.read(ao),
+        None => pass.view(&pipeline.white),
+    };
+    pass.write(out)
+        .uniform(bytemuck::bytes_of(&settings))
+        .buffer(&scene.sky)
+        .view(&scene.sky_image)
+        .dispatch(
+            pipeline.pipeline.clone(),
+            [d.width.div_ceil(16), d.height.div_ceil(16), 1],
+        )?;
+    Ok(out)
 }

@@ -1,14 +1,11 @@
 //! Screen-space ambient occlusion: a hemisphere kernel, per-pixel rotation, range check, and a
 //! 4×4 blur. It darkens only the indirect (light-map) term of the lighting.
 
-use std::sync::Arc;
-
-use wgpu::util::DeviceExt;
-
+use crate::RenderError;
 use crate::gbuffer::GBuffer;
 use crate::graph::{RenderGraph, TextureDesc, TextureHandle};
+use crate::pass::{FullscreenEffect, Slot, UNFILTERABLE};
 use crate::scene::GpuScene;
-use crate::util::{fullscreen_pipeline, texture_entry, uniform_entry};
 
 /// The AO format.
 pub const AO_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R8Unorm;
@@ -117,52 +114,23 @@ struct SsaoUniform {
 
 /// The SSAO and blur pipelines.
 pub struct SsaoPipeline {
-    layout: wgpu::BindGroupLayout,
-    pipeline: wgpu::RenderPipeline,
-    blur_layout: wgpu::BindGroupLayout,
-    blur: wgpu::RenderPipeline,
+    ssao: FullscreenEffect,
+    blur: FullscreenEffect,
 }
 
 impl SsaoPipeline {
-    /// Compiles the pipelines.
+    /// Declares the bindings; the pipelines compile on first use.
     pub fn new(device: &wgpu::Device) -> Self {
-        let float = wgpu::TextureSampleType::Float { filterable: false };
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("ssao_layout"),
-            entries: &[
-                uniform_entry(0, wgpu::ShaderStages::FRAGMENT),
-                texture_entry(1, wgpu::TextureSampleType::Depth),
-                texture_entry(2, float),
-                uniform_entry(3, wgpu::ShaderStages::FRAGMENT),
-            ],
-        });
-        let blur_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("ssao_blur_layout"),
-            entries: &[texture_entry(0, float)],
-        });
-        let pipeline = fullscreen_pipeline(
-            device,
-            "ssao_pipeline",
-            &shader_source(),
-            "ssao_fs",
-            &layout,
-            AO_FORMAT,
-            None,
-        );
-        let blur = fullscreen_pipeline(
-            device,
-            "ssao_blur_pipeline",
-            &blur_shader_source(),
-            "ssao_blur_fs",
-            &blur_layout,
-            AO_FORMAT,
-            None,
-        );
+        let depth = Slot::Texture(wgpu::TextureSampleType::Depth);
+        let tex = Slot::Texture(UNFILTERABLE);
         Self {
-            layout,
-            pipeline,
-            blur_layout,
-            blur,
+            ssao: FullscreenEffect::new(
+                device,
+                "ssao",
+                shader_source(),
+                &[Slot::Uniform, depth, tex, Slot::Uniform],
+            ),
+            blur: FullscreenEffect::new(device, "ssao_blur", blur_shader_source(), &[tex]),
         }
     }
 }
@@ -171,11 +139,10 @@ impl SsaoPipeline {
 pub fn ssao_pass(
     graph: &mut RenderGraph,
     gbuffer: &GBuffer,
+    scene: &GpuScene,
     settings: &Ssao,
-    pipeline: Arc<SsaoPipeline>,
-    scene: Arc<GpuScene>,
-    device: &wgpu::Device,
-) -> TextureHandle {
+    pipeline: &SsaoPipeline,
+) -> Result<TextureHandle, RenderError> {
     let d = graph.desc(gbuffer.depth);
     let raw = graph.create("ssao_raw", TextureDesc::new(d.width, d.height, AO_FORMAT));
     let out = graph.create("ssao", TextureDesc::new(d.width, d.height, AO_FORMAT));
@@ -183,62 +150,27 @@ pub fn ssao_pass(
     for (k, v) in kernel.iter_mut().zip(settings.kernel()) {
         *k = v;
     }
-    let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("ssao_settings"),
-        contents: bytemuck::bytes_of(&SsaoUniform {
-            kernel,
-            params: [
-                settings.radius,
-                settings.bias,
-                settings.intensity,
-                settings.samples.clamp(1, MAX_SAMPLES) as f32,
-            ],
-        }),
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
-    let (depth, normal) = (gbuffer.depth, gbuffer.normal);
-    let p = pipeline.clone();
-    graph.add_pass("ssao_pass", &[depth, normal], &[raw], move |ctx| {
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("ssao_bind_group"),
-            layout: &p.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: scene.camera.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(ctx.view(depth)),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::TextureView(ctx.view(normal)),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: uniform.as_entire_binding(),
-                },
-            ],
-        });
-        crate::util::draw_fullscreen(ctx.encoder, "ssao_pass", ctx.view(raw), &p.pipeline, &bind);
-    });
-    graph.add_pass("ssao_blur_pass", &[raw], &[out], move |ctx| {
-        let bind = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("ssao_blur_bind_group"),
-            layout: &pipeline.blur_layout,
-            entries: &[wgpu::BindGroupEntry {
-                binding: 0,
-                resource: wgpu::BindingResource::TextureView(ctx.view(raw)),
-            }],
-        });
-        crate::util::draw_fullscreen(
-            ctx.encoder,
-            "ssao_blur_pass",
-            ctx.view(out),
-            &pipeline.blur,
-            &bind,
-        );
-    });
-    out
+    let uniform = SsaoUniform {
+        kernel,
+        params: [
+            settings.radius,
+            settings.bias,
+            settings.intensity,
+            settings.samples.clamp(1, MAX_SAMPLES) as f32,
+        ],
+    };
+    pipeline
+        .ssao
+        .pass(graph, "ssao_pass")
+        .buffer(&scene.camera)
+        .read(gbuffer.depth)
+        .read(gbuffer.normal)
+        .uniform(bytemuck::bytes_of(&uniform))
+        .draw("ssao_fs", raw)?;
+    pipeline
+        .blur
+        .pass(graph, "ssao_blur_pass")
+        .read(raw)
+        .draw("ssao_blur_fs", out)?;
+    Ok(out)
 }
