@@ -3,9 +3,9 @@
 
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
-use radiant_render::capture::read_buffer;
+use radiant_render::GpuContext;
+use radiant_render::capture::{ReadbackError, read_buffer};
 use radiant_render::util::{storage_entry, uniform_entry};
-use radiant_render::{GpuContext, RenderError};
 use radiant_scene::Scene;
 use radiant_scene::atlas::Atlas;
 use wgpu::util::DeviceExt;
@@ -559,7 +559,7 @@ impl Gpu {
         self.ctx.poll_errors().map_err(GatherError::Gpu)?;
         self.parity = 1 - p;
         let floats: &[f32] = bytemuck::try_cast_slice(&bytes)
-            .map_err(|e| GatherError::Gpu(RenderError::Readback(e.to_string())))?;
+            .map_err(|e| GatherError::Gpu(ReadbackError::Layout(e).into()))?;
         Ok(floats
             .chunks_exact(4)
             .take(self.receivers)

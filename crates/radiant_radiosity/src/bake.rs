@@ -6,7 +6,6 @@ use std::time::{Duration, Instant};
 
 use radiant_scene::{Light, Scene, Sky, Surface};
 
-use crate::BakeError;
 use crate::hierarchy::{self, Hierarchy, Relink, RootMatch};
 use crate::input::{self, Lighting};
 use crate::links;
@@ -17,6 +16,7 @@ use crate::report::{BakeReport, BakeResult, PhaseTimes, TimelinePoint};
 use crate::solve::{Info, Solve, SolveError};
 use crate::solvers::SolverKind;
 use crate::system::{Rgb, System};
+use crate::{BakeError, ParameterError};
 
 /// Progress callbacks.
 #[derive(Debug)]
@@ -238,11 +238,11 @@ impl Bake {
     /// some: it has no links to keep.
     pub fn edit_surfaces(&mut self, surfaces: &[Surface]) -> Result<(), BakeError> {
         if surfaces.len() != self.surfaces.len() {
-            return Err(BakeError::InvalidParameter(format!(
-                "an edit must keep the {} surfaces ({} given)",
-                self.surfaces.len(),
-                surfaces.len()
-            )));
+            return Err(ParameterError::SurfaceCount {
+                expected: self.surfaces.len(),
+                given: surfaces.len(),
+            }
+            .into());
         }
         input::validate_surfaces(surfaces)?;
         let (rho, source) = self.lighting.terms(surfaces, &self.mesh);

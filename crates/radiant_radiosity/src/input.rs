@@ -23,7 +23,7 @@ use radiant_visibility::{Bvh, Visibility};
 use rayon::prelude::*;
 
 use crate::mesh::Mesh;
-use crate::{BakeError, FormFactorParams, Rgb};
+use crate::{BakeError, FormFactorParams, ParameterError, Rgb, SceneError};
 
 /// The part of the scene a bake lights: dynamic surfaces take no part.
 pub fn static_scene(scene: &Scene) -> std::borrow::Cow<'_, Scene> {
@@ -38,14 +38,19 @@ pub fn static_scene(scene: &Scene) -> std::borrow::Cow<'_, Scene> {
 /// emission) and triangles that name no surface.
 pub fn validate(scene: &Scene) -> Result<(), BakeError> {
     validate_surfaces(&scene.surfaces)?;
-    if scene
+    let surfaces = scene.surfaces.len();
+    if let Some((triangle, t)) = scene
         .triangles
         .iter()
-        .any(|t| t.surface as usize >= scene.surfaces.len())
+        .enumerate()
+        .find(|(_, t)| t.surface as usize >= surfaces)
     {
-        return Err(BakeError::InvalidScene(
-            "a triangle names a surface that does not exist".into(),
-        ));
+        return Err(SceneError::UnknownSurface {
+            triangle,
+            surface: t.surface as usize,
+            surfaces,
+        }
+        .into());
     }
     Ok(())
 }
@@ -84,10 +89,10 @@ pub fn validate_lights(lights: &[Light]) -> Result<(), BakeError> {
             && l.intensity.is_finite()
             && l.color.iter().all(|c| c.is_finite());
         if !finite || l.intensity < 0.0 || l.color.iter().any(|&c| c < 0.0) {
-            return Err(BakeError::InvalidParameter(format!(
-                "light '{}' has a non-finite or negative value",
-                l.name
-            )));
+            return Err(ParameterError::BadLight {
+                light: l.name.clone(),
+            }
+            .into());
         }
     }
     Ok(())

@@ -52,12 +52,83 @@ pub use solve::{Info, Solve, SolveError, Stall, eta_seconds};
 pub use solvers::{Solver, SolverKind, SolverParams};
 pub use system::{Rgb, System};
 
+/// Why a scene cannot be baked.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SceneError {
+    /// A triangle names a surface index past the surface list.
+    #[error("triangle {triangle} names surface {surface}, but the scene has {surfaces} surfaces")]
+    UnknownSurface {
+        /// The triangle.
+        triangle: usize,
+        /// The surface index it names.
+        surface: usize,
+        /// Surfaces in the scene.
+        surfaces: usize,
+    },
+    /// A triangle with a NaN or infinite vertex.
+    #[error("triangle {triangle} has a vertex that is not finite")]
+    NonFiniteVertex {
+        /// The triangle.
+        triangle: usize,
+    },
+    /// Nothing to bake.
+    #[error("the scene has no triangles")]
+    NoTriangles,
+    /// Every vertex at one point.
+    #[error("the scene has zero extent")]
+    ZeroExtent,
+}
+
+/// A bake parameter no bake can use.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ParameterError {
+    /// A number outside its range.
+    #[error("{name} = {value} is outside its range {range}")]
+    OutOfRange {
+        /// The parameter, as the CLI names it.
+        name: &'static str,
+        /// The value given.
+        value: f64,
+        /// The valid range.
+        range: &'static str,
+    },
+    /// A light with a non-finite or negative value.
+    #[error("light '{light}' has a non-finite or negative value")]
+    BadLight {
+        /// The light's name.
+        light: String,
+    },
+    /// An edit that changes the number of surfaces.
+    #[error("an edit must keep the {expected} surfaces ({given} given)")]
+    SurfaceCount {
+        /// Surfaces of the bake.
+        expected: usize,
+        /// Surfaces of the edit.
+        given: usize,
+    },
+    /// A form-factor method the hierarchy does not compute.
+    #[error(
+        "the clustered hierarchy computes form factors analytic or ray-cast, not {method}: use --hierarchy triangles for it"
+    )]
+    FormFactors {
+        /// The method asked for.
+        method: &'static str,
+    },
+}
+
+impl ParameterError {
+    /// `name = value` outside `range`.
+    pub fn out_of_range(name: &'static str, value: f64, range: &'static str) -> Self {
+        Self::OutOfRange { name, value, range }
+    }
+}
+
 /// Errors from baking. Each says what to change.
 #[derive(Debug, thiserror::Error)]
 pub enum BakeError {
     /// The scene cannot be baked as given.
     #[error("invalid scene: {0}")]
-    InvalidScene(String),
+    InvalidScene(#[from] SceneError),
     /// A material value is out of range.
     #[error("surface '{surface}': {what}")]
     InvalidMaterial {
@@ -68,7 +139,7 @@ pub enum BakeError {
     },
     /// A parameter is out of range.
     #[error("invalid parameter: {0}")]
-    InvalidParameter(String),
+    InvalidParameter(#[from] ParameterError),
     /// The patch size would create too many elements.
     #[error("{elements} elements exceed the limit of {limit}: use a larger --patch-size")]
     TooManyElements {
@@ -96,7 +167,7 @@ pub enum BakeError {
     NeedsRebuild,
     /// A reference file could not be used.
     #[error("reference: {0}")]
-    Reference(String),
+    Reference(#[from] metrics::ReferenceFileError),
     /// The bake would need more memory than its budget (`--memory-limit`), even at the
     /// coarsest thresholds it may use. Nothing of that size was allocated.
     #[error(

@@ -10,7 +10,7 @@
 use glam::{DVec3, Vec3};
 use radiant_scene::Scene;
 
-use crate::BakeError;
+use crate::{BakeError, ParameterError, SceneError};
 
 /// Marks a leaf in [`Node::first_child`].
 pub const NO_CHILD: u32 = u32::MAX;
@@ -145,10 +145,9 @@ impl Mesh {
         } else if params.patch_size == 0.0 {
             0.25
         } else {
-            return Err(BakeError::InvalidParameter(format!(
-                "patch size {} must be positive",
-                params.patch_size
-            )));
+            return Err(
+                ParameterError::out_of_range("patch size", params.patch_size, "(0, inf)").into(),
+            );
         };
         // Plan depths first, so the element budget is checked before allocating.
         let mut plan = Vec::with_capacity(scene.triangles.len());
@@ -234,10 +233,9 @@ impl Mesh {
         } else if params.patch_size > 0.0 && params.patch_size.is_finite() {
             params.patch_size / frame.scale
         } else {
-            return Err(BakeError::InvalidParameter(format!(
-                "patch size {} must be positive",
-                params.patch_size
-            )));
+            return Err(
+                ParameterError::out_of_range("patch size", params.patch_size, "(0, inf)").into(),
+            );
         };
         let element_size = patch / f64::from(1u32 << params.element_levels.min(16));
         let mut plan = Vec::with_capacity(scene.triangles.len());
@@ -407,21 +405,21 @@ impl Mesh {
 fn frame_of(scene: &Scene) -> Result<Frame, BakeError> {
     let mut lo = DVec3::splat(f64::INFINITY);
     let mut hi = DVec3::splat(f64::NEG_INFINITY);
-    for t in &scene.triangles {
+    for (triangle, t) in scene.triangles.iter().enumerate() {
         for v in t.vertices {
             if !v.is_finite() {
-                return Err(BakeError::InvalidScene("non-finite vertex".into()));
+                return Err(SceneError::NonFiniteVertex { triangle }.into());
             }
             lo = lo.min(v);
             hi = hi.max(v);
         }
     }
     if scene.triangles.is_empty() {
-        return Err(BakeError::InvalidScene("the scene has no triangles".into()));
+        return Err(SceneError::NoTriangles.into());
     }
     let scale = (hi - lo).max_element();
     if !(scale > 0.0 && scale.is_finite()) {
-        return Err(BakeError::InvalidScene("the scene has zero extent".into()));
+        return Err(SceneError::ZeroExtent.into());
     }
     Ok(Frame {
         center: (lo + hi) * 0.5,

@@ -13,6 +13,73 @@
 use radiant_scene::Surface;
 
 use crate::BakeError;
+
+/// Why a reference file (a surface or point CSV) cannot be compared with.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ReferenceFileError {
+    /// No lines besides comments.
+    #[error("empty {what}")]
+    Empty {
+        /// Which file.
+        what: &'static str,
+    },
+    /// A surface CSV with neither our columns nor Mitsuba's.
+    #[error("header needs b_r,b_g,b_b (ours) or B_r,B_g,B_b (Mitsuba)")]
+    NoRadiosityColumns,
+    /// A point CSV without a column it needs.
+    #[error("point reference: no column '{column}'")]
+    NoColumn {
+        /// The column.
+        column: &'static str,
+    },
+    /// A cell that is not a finite number.
+    #[error("row {row}: bad number in column {column}")]
+    BadNumber {
+        /// The line, counting the header as 1.
+        row: usize,
+        /// The column, from 1.
+        column: usize,
+    },
+    /// A row without a surface name.
+    #[error("row {row}: no surface name")]
+    NoName {
+        /// The line, counting the header as 1.
+        row: usize,
+    },
+    /// A point whose normal is zero.
+    #[error("point row {row}: zero normal")]
+    ZeroNormal {
+        /// The line, counting the header as 1.
+        row: usize,
+    },
+    /// A header and no rows.
+    #[error("no rows")]
+    NoRows,
+    /// No surface of the scene has a row.
+    #[error("no surface of the scene is in the reference")]
+    NoCommonSurface,
+    /// No element of the bake lies at a reference point.
+    #[error("no element at point '{point}'")]
+    NoElementAt {
+        /// The point's name.
+        point: String,
+    },
+    /// The point to normalise by is not in the reference.
+    #[error("no reference point '{point}'")]
+    NoPoint {
+        /// The point's name.
+        point: String,
+    },
+    /// The point to normalise by is black (in the bake or the reference).
+    #[error("point '{point}' has no luminance to normalise by")]
+    NoLuminance {
+        /// The point's name.
+        point: String,
+    },
+    /// Only the normalising point, or none.
+    #[error("no points to compare")]
+    NoPoints,
+}
 use crate::mesh::Mesh;
 use crate::system::Rgb;
 
@@ -104,9 +171,7 @@ pub fn compare_surfaces(
         })
         .collect();
     if pairs.is_empty() {
-        return Err(BakeError::Reference(
-            "no surface of the scene is in the reference".into(),
-        ));
+        return Err(ReferenceFileError::NoCommonSurface.into());
     }
     // Relative to at least 1e-3 of the mean: a surface the reference finds (almost) unlit
     // would otherwise divide by nearly zero.
@@ -141,15 +206,15 @@ pub fn compare_elements(area: &[f64], got: &[Rgb], reference: &[Rgb]) -> ErrorSt
 /// `what` names the file in the error for an empty one.
 fn csv_lines<'a>(
     text: &'a str,
-    what: &str,
-) -> Result<(Vec<&'a str>, impl Iterator<Item = &'a str>), BakeError> {
+    what: &'static str,
+) -> Result<(Vec<&'a str>, impl Iterator<Item = &'a str>), ReferenceFileError> {
     let mut lines = text
         .lines()
         .map(str::trim)
         .filter(|l| !l.is_empty() && !l.starts_with('#'));
     let header = lines
         .next()
-        .ok_or_else(|| BakeError::Reference(format!("empty {what}")))?
+        .ok_or(ReferenceFileError::Empty { what })?
         .split(',')
         .map(str::trim)
         .collect();
@@ -175,9 +240,7 @@ pub fn parse_reference_csv(text: &str) -> Result<Vec<(String, Rgb)>, BakeError> 
             },
         )
     } else {
-        return Err(BakeError::Reference(
-            "header needs b_r,b_g,b_b (ours) or B_r,B_g,B_b (Mitsuba)".into(),
-        ));
+        return Err(ReferenceFileError::NoRadiosityColumns.into());
     };
     let mut out = Vec::new();
     for (k, line) in lines.enumerate() {
@@ -186,14 +249,18 @@ pub fn parse_reference_csv(text: &str) -> Result<Vec<(String, Rgb)>, BakeError> 
             f.get(i)
                 .and_then(|s| s.parse::<f64>().ok())
                 .filter(|v| v.is_finite())
-                .ok_or_else(|| {
-                    BakeError::Reference(format!("row {}: bad number in column {}", k + 2, i + 1))
-                })
+                .ok_or(
+                    ReferenceFileError::BadNumber {
+                        row: k + 2,
+                        column: i + 1,
+                    }
+                    .into(),
+                )
         };
         let name = f
             .first()
             .filter(|s| !s.is_empty())
-            .ok_or_else(|| BakeError::Reference(format!("row {}: no surface name", k + 2)))?;
+            .ok_or(ReferenceFileError::NoName { row: k + 2 })?;
         out.push((
             name.to_string(),
             [
@@ -204,7 +271,7 @@ pub fn parse_reference_csv(text: &str) -> Result<Vec<(String, Rgb)>, BakeError> 
         ));
     }
     if out.is_empty() {
-        return Err(BakeError::Reference("no rows".into()));
+        return Err(ReferenceFileError::NoRows.into());
     }
     Ok(out)
 }
@@ -307,14 +374,15 @@ pub fn parse_point_csv(text: &str, mm_to_scene: f64) -> Result<Vec<PointReferenc
     let want = [
         "x_mm", "y_mm", "z_mm", "nx", "ny", "nz", "L_r", "L_g", "L_b",
     ];
-    let cols: Vec<usize> =
-        want.iter()
-            .map(|w| {
-                header.iter().position(|h| h == w).ok_or_else(|| {
-                    BakeError::Reference(format!("point reference: no column '{w}'"))
-                })
-            })
-            .collect::<Result<_, _>>()?;
+    let cols: Vec<usize> = want
+        .iter()
+        .map(|w| {
+            header
+                .iter()
+                .position(|h| h == w)
+                .ok_or(ReferenceFileError::NoColumn { column: w })
+        })
+        .collect::<Result<_, _>>()?;
     let mut out = Vec::new();
     for (k, line) in lines.enumerate() {
         let f: Vec<&str> = line.split(',').map(str::trim).collect();
@@ -324,14 +392,15 @@ pub fn parse_point_csv(text: &str, mm_to_scene: f64) -> Result<Vec<PointReferenc
                 f.get(c)
                     .and_then(|s| s.parse::<f64>().ok())
                     .filter(|x| x.is_finite())
-                    .ok_or_else(|| {
-                        BakeError::Reference(format!("point row {}: bad column {}", k + 2, c + 1))
+                    .ok_or(ReferenceFileError::BadNumber {
+                        row: k + 2,
+                        column: c + 1,
                     })
             })
             .collect::<Result<_, _>>()?;
         let normal = glam::DVec3::new(v[3], v[4], v[5])
             .try_normalize()
-            .ok_or_else(|| BakeError::Reference(format!("point row {}: zero normal", k + 2)))?;
+            .ok_or(ReferenceFileError::ZeroNormal { row: k + 2 })?;
         out.push(PointReference {
             name: f.first().copied().unwrap_or_default().to_string(),
             position: glam::DVec3::new(v[0], v[1], v[2]) * mm_to_scene,
@@ -419,22 +488,29 @@ pub fn compare_points_with(
     at: impl Fn(&PointReference) -> Option<Rgb>,
 ) -> Result<PointComparison, BakeError> {
     let at = |r: &PointReference| -> Result<Rgb, BakeError> {
-        at(r).ok_or_else(|| BakeError::Reference(format!("no element at point '{}'", r.name)))
+        at(r).ok_or_else(|| {
+            ReferenceFileError::NoElementAt {
+                point: r.name.clone(),
+            }
+            .into()
+        })
     };
     let scale = match normalise_to {
         Some(name) => {
-            let r = reference
-                .iter()
-                .find(|r| r.name == name)
-                .ok_or_else(|| BakeError::Reference(format!("no reference point '{name}'")))?;
+            let r = reference.iter().find(|r| r.name == name).ok_or_else(|| {
+                ReferenceFileError::NoPoint {
+                    point: name.to_string(),
+                }
+            })?;
             let (ours, theirs) = (
                 radiant_color::luminance(at(r)?),
                 radiant_color::luminance(r.radiosity),
             );
             if !(theirs > 0.0 && ours > 0.0 && ours.is_finite()) {
-                return Err(BakeError::Reference(format!(
-                    "point '{name}' has no luminance to normalise by"
-                )));
+                return Err(ReferenceFileError::NoLuminance {
+                    point: name.to_string(),
+                }
+                .into());
             }
             ours / theirs
         }
@@ -457,7 +533,7 @@ pub fn compare_points_with(
         });
     }
     if points.is_empty() {
-        return Err(BakeError::Reference("no points to compare".into()));
+        return Err(ReferenceFileError::NoPoints.into());
     }
     let n = points.len() as f64;
     Ok(PointComparison {

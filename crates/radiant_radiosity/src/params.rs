@@ -2,11 +2,11 @@
 
 use std::time::Duration;
 
-use crate::BakeError;
 use crate::form_factors::{FormFactorKind, FormFactorParams};
 use crate::links::LinkParams;
 use crate::mesh::MeshParams;
 use crate::solvers::{SolverKind, SolverParams};
+use crate::{BakeError, ParameterError};
 
 /// Everything a bake can be told. `Default` gives the settings the accuracy tests hold to.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -50,19 +50,15 @@ impl BakeParams {
     pub fn check(&self) -> Result<(), BakeError> {
         let tolerance = self.solver_params.tolerance;
         if !(tolerance.is_finite() && tolerance > 0.0) {
-            return Err(BakeError::InvalidParameter(format!(
-                "tolerance {tolerance} must be positive"
-            )));
+            return Err(ParameterError::out_of_range("tolerance", tolerance, "(0, inf)").into());
         }
         if !(self.links.far_field.is_finite() && self.links.far_field >= 0.0) {
-            return Err(BakeError::InvalidParameter(
-                "far field must be a number >= 0".into(),
-            ));
+            let far = self.links.far_field;
+            return Err(ParameterError::out_of_range("far field", far, "[0, inf)").into());
         }
         if !(self.links.refinement.is_finite() && self.links.refinement > 0.0) {
-            return Err(BakeError::InvalidParameter(
-                "refinement must be positive".into(),
-            ));
+            let refinement = self.links.refinement;
+            return Err(ParameterError::out_of_range("refinement", refinement, "(0, inf)").into());
         }
         Ok(())
     }

@@ -15,12 +15,12 @@ use std::time::Duration;
 use radiant_color::cie::{self, Spectrum};
 use radiant_scene::Surface;
 
-use crate::BakeError;
 use crate::mesh::Mesh;
 use crate::metrics::{SurfaceMean, surface_means};
 use crate::solve::{Solve, SolveError};
 use crate::solvers::{SolverKind, SolverParams};
 use crate::system::{Rgb, System};
+use crate::{BakeError, ParameterError};
 
 /// Spectral data of one material.
 #[derive(Clone, Debug, PartialEq)]
@@ -92,9 +92,7 @@ pub fn solve_spectral(
     tolerance: f64,
 ) -> Result<SpectralResult, BakeError> {
     if !(3..=96).contains(&bands) {
-        return Err(BakeError::InvalidParameter(format!(
-            "{bands} bands: use 3 to 96"
-        )));
+        return Err(ParameterError::out_of_range("bands", bands as f64, "3..=96").into());
     }
     let cmf = band_cmf(bands);
     // Per surface: band reflectance and band emission (scaled to the RGB emission's luminance).

@@ -316,3 +316,42 @@ fn bad_materials_and_parameters_are_typed_errors() {
     assert!(!r.report.converged);
     assert!(r.radiosity.iter().flatten().all(|v| v.is_finite()));
 }
+
+#[test]
+fn bad_input_errors_carry_the_numbers() {
+    use radiant_radiosity::metrics::{ReferenceFileError, parse_reference_csv};
+    use radiant_radiosity::{ParameterError, SceneError};
+    let mut s = Scene::default();
+    let floor = quad(DVec3::ZERO, DVec3::X, DVec3::Z);
+    add_surface(&mut s, "floor", [0.5; 3], [1.0; 3], &floor);
+    let mut p = BakeParams::default();
+    p.links.refinement = -2.0;
+    match Bake::new(&s, &p) {
+        Err(BakeError::InvalidParameter(ParameterError::OutOfRange { name, value, .. })) => {
+            assert_eq!((name, value), ("refinement", -2.0));
+        }
+        other => panic!("expected an out-of-range refinement, got {:?}", other.err()),
+    }
+    s.triangles[1].surface = 7;
+    assert_eq!(
+        Bake::new(&s, &BakeParams::default())
+            .err()
+            .map(|e| e.to_string()),
+        Some(
+            BakeError::from(SceneError::UnknownSurface {
+                triangle: 1,
+                surface: 7,
+                surfaces: 1,
+            })
+            .to_string()
+        )
+    );
+    let csv = "surface,area,b_r,b_g,b_b\nfloor,1,0.5,0.5,0.5\nwall,1,0.5,x,0.5\n";
+    assert!(matches!(
+        parse_reference_csv(csv),
+        Err(BakeError::Reference(ReferenceFileError::BadNumber {
+            row: 3,
+            column: 4
+        }))
+    ));
+}

@@ -17,6 +17,14 @@ pub struct Image {
 }
 
 impl Image {
+    fn size_error(&self) -> RenderError {
+        RenderError::ImageSize {
+            width: self.width,
+            height: self.height,
+            texels: self.texels.len(),
+        }
+    }
+
     /// The texel at (x, y).
     pub fn at(&self, x: u32, y: u32) -> [f32; 4] {
         self.texels[(y * self.width + x) as usize]
@@ -32,6 +40,29 @@ impl Image {
     }
 }
 
+/// Why a texture or buffer could not be read back.
+#[derive(Debug, thiserror::Error)]
+pub enum ReadbackError {
+    /// Waiting for the device failed.
+    #[error("waiting for the GPU: {0}")]
+    Poll(wgpu::PollError),
+    /// Mapping the buffer failed.
+    #[error("mapping the buffer: {0}")]
+    Map(wgpu::BufferAsyncError),
+    /// The mapped range could not be read.
+    #[error("reading the mapped range: {0}")]
+    Range(wgpu::MapRangeError),
+    /// The bytes read back are not the expected texel or value layout.
+    #[error("the bytes read back do not cast to the expected values: {0:?}")]
+    Layout(bytemuck::PodCastError),
+    /// The map callback never ran.
+    #[error("the map callback was dropped")]
+    Disconnected,
+    /// A texel format readback does not decode.
+    #[error("cannot read back {0:?}")]
+    Format(wgpu::TextureFormat),
+}
+
 /// Waits for a mappable buffer and copies its contents out.
 pub fn read_buffer(gpu: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, RenderError> {
     let slice = buffer.slice(..);
@@ -41,13 +72,13 @@ pub fn read_buffer(gpu: &GpuContext, buffer: &wgpu::Buffer) -> Result<Vec<u8>, R
     });
     gpu.device
         .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| RenderError::Readback(e.to_string()))?;
+        .map_err(ReadbackError::Poll)?;
     rx.recv()
-        .map_err(|e| RenderError::Readback(e.to_string()))?
-        .map_err(|e| RenderError::Readback(e.to_string()))?;
+        .map_err(|_| ReadbackError::Disconnected)?
+        .map_err(ReadbackError::Map)?;
     let data = slice
         .get_mapped_range()
-        .map_err(|e| RenderError::Readback(e.to_string()))?
+        .map_err(ReadbackError::Range)?
         .to_vec();
     buffer.unmap();
     Ok(data)
@@ -84,8 +115,7 @@ pub fn f16_to_f32(h: u16) -> f32 {
 /// Copies a whole 2D texture (mip 0) to the CPU.
 pub fn read_texture(gpu: &GpuContext, texture: &wgpu::Texture) -> Result<Image, RenderError> {
     let (w, h, format) = (texture.width(), texture.height(), texture.format());
-    let bpp = texel_bytes(format)
-        .ok_or_else(|| RenderError::Readback(format!("cannot read back {format:?}")))?;
+    let bpp = texel_bytes(format).ok_or(ReadbackError::Format(format))?;
     let unpadded = w * bpp;
     let padded =
         unpadded.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
@@ -176,11 +206,10 @@ pub fn write_png(path: &Path, img: &Image) -> Result<(), RenderError> {
     for px in rgba.chunks_exact_mut(4) {
         px[3] = 255;
     }
-    let buf = image::RgbaImage::from_raw(img.width, img.height, rgba)
-        .ok_or_else(|| RenderError::Image("image size mismatch".into()))?;
+    let buf = image::RgbaImage::from_raw(img.width, img.height, rgba).ok_or(img.size_error())?;
     write_atomically(path, |tmp| {
         buf.save_with_format(tmp, image::ImageFormat::Png)
-            .map_err(|e| RenderError::Image(e.to_string()))
+            .map_err(RenderError::Image)
     })
 }
 
@@ -191,18 +220,17 @@ pub fn write_exr(path: &Path, img: &Image) -> Result<(), RenderError> {
         .iter()
         .flat_map(|t| [t[0], t[1], t[2], 1.0])
         .collect();
-    let buf = image::Rgba32FImage::from_raw(img.width, img.height, data)
-        .ok_or_else(|| RenderError::Image("image size mismatch".into()))?;
+    let buf = image::Rgba32FImage::from_raw(img.width, img.height, data).ok_or(img.size_error())?;
     write_atomically(path, |tmp| {
         buf.save_with_format(tmp, image::ImageFormat::OpenExr)
-            .map_err(|e| RenderError::Image(e.to_string()))
+            .map_err(RenderError::Image)
     })
 }
 
 /// Reads an image file (EXR, HDR, PNG) as linear RGBA f32 as stored.
 pub fn read_image(bytes: &[u8]) -> Result<Image, RenderError> {
     let img = image::load_from_memory(bytes)
-        .map_err(|e| RenderError::Image(e.to_string()))?
+        .map_err(RenderError::Image)?
         .to_rgba32f();
     Ok(Image {
         width: img.width(),

@@ -25,6 +25,23 @@ pub struct Requirements {
     pub render_formats: Vec<(wgpu::TextureFormat, bool)>,
 }
 
+/// What an adapter lacks for a pass ([`GpuContext::check`]).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum Missing {
+    /// Device features.
+    #[error("missing features {0:?}")]
+    Features(wgpu::Features),
+    /// A format the pass writes as a storage texture.
+    #[error("{0:?} is not usable as a storage texture")]
+    Storage(wgpu::TextureFormat),
+    /// A format the pass renders to.
+    #[error("{0:?} is not renderable")]
+    Render(wgpu::TextureFormat),
+    /// A format the pass blends into.
+    #[error("{0:?} is not blendable")]
+    Blend(wgpu::TextureFormat),
+}
+
 /// An adapter, its device and queue, and what they can do.
 pub struct GpuContext {
     /// The instance the adapter came from (needed to create surfaces).
@@ -89,7 +106,7 @@ impl GpuContext {
                 ..Default::default()
             })
             .await
-            .map_err(|e| RenderError::RequestDevice(e.to_string()))?;
+            .map_err(RenderError::RequestDevice)?;
         // wgpu's default handler panics on a validation error; record it and fail the frame.
         let errors = Arc::new(Mutex::new(Vec::new()));
         let sink = errors.clone();
@@ -124,10 +141,10 @@ impl GpuContext {
     }
 
     /// Checks that the adapter can run a pass; `Err` says what is missing.
-    pub fn check(&self, req: &Requirements) -> Result<(), String> {
+    pub fn check(&self, req: &Requirements) -> Result<(), Missing> {
         let missing = req.features - self.adapter.features();
         if !missing.is_empty() {
-            return Err(format!("missing features {missing:?}"));
+            return Err(Missing::Features(missing));
         }
         for &f in &req.storage_formats {
             let ff = self.adapter.get_texture_format_features(f);
@@ -135,7 +152,7 @@ impl GpuContext {
                 .allowed_usages
                 .contains(wgpu::TextureUsages::STORAGE_BINDING)
             {
-                return Err(format!("{f:?} is not usable as a storage texture"));
+                return Err(Missing::Storage(f));
             }
         }
         for &(f, blend) in &req.render_formats {
@@ -144,14 +161,14 @@ impl GpuContext {
                 .allowed_usages
                 .contains(wgpu::TextureUsages::RENDER_ATTACHMENT)
             {
-                return Err(format!("{f:?} is not renderable"));
+                return Err(Missing::Render(f));
             }
             if blend
                 && !ff
                     .flags
                     .contains(wgpu::TextureFormatFeatureFlags::BLENDABLE)
             {
-                return Err(format!("{f:?} is not blendable"));
+                return Err(Missing::Blend(f));
             }
         }
         Ok(())

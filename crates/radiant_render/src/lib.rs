@@ -56,7 +56,7 @@ pub enum RenderError {
     },
     /// The adapter refused to create a device.
     #[error("could not create a GPU device: {0}")]
-    RequestDevice(String),
+    RequestDevice(wgpu::RequestDeviceError),
     /// A pass needs something the adapter lacks (essential passes only; optional ones are
     /// skipped with a warning).
     #[error("pass `{pass}` cannot run on this adapter: {reason}")]
@@ -64,7 +64,7 @@ pub enum RenderError {
         /// The pass.
         pass: &'static str,
         /// What is missing.
-        reason: String,
+        reason: context::Missing,
     },
     /// A pass needs an input its caller did not give.
     #[error("pass `{pass}` needs the {input} texture")]
@@ -85,7 +85,7 @@ pub enum RenderError {
     NoFrame,
     /// Reading a texture back failed.
     #[error("readback failed: {0}")]
-    Readback(String),
+    Readback(#[from] capture::ReadbackError),
     /// The target size is zero or above the adapter's limit.
     #[error("size {width}×{height} is outside 1..={max} per side")]
     InvalidSize {
@@ -108,7 +108,7 @@ pub enum RenderError {
     },
     /// The scene is inconsistent (a triangle naming a missing surface, say).
     #[error("invalid scene: {0}")]
-    InvalidScene(String),
+    InvalidScene(#[from] scene::SceneError),
     /// The scene has no triangles.
     #[error("the scene has no triangles to draw")]
     EmptyScene,
@@ -128,7 +128,23 @@ pub enum RenderError {
     NonFinite(&'static str),
     /// Encoding an image failed.
     #[error("image encoding: {0}")]
-    Image(String),
+    Image(#[from] image::ImageError),
+    /// An image whose texels do not fill its size.
+    #[error("an image of {width}×{height} with {texels} texels")]
+    ImageSize {
+        /// Width.
+        width: u32,
+        /// Height.
+        height: u32,
+        /// Texels given.
+        texels: usize,
+    },
+    /// A window surface could not be created.
+    #[error("cannot create a surface: {0}")]
+    Surface(#[from] wgpu::CreateSurfaceError),
+    /// The window surface offers no format to render to.
+    #[error("the surface supports no format")]
+    NoSurfaceFormat,
     /// A file could not be written.
     #[error(transparent)]
     Io(#[from] std::io::Error),

@@ -10,6 +10,67 @@ use radiant_scene::Sky;
 use wgpu::util::DeviceExt;
 
 use crate::RenderError;
+
+/// Why a render scene cannot be uploaded.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum SceneError {
+    /// An atlas made for another scene.
+    #[error("an atlas of {atlas} triangles for a scene of {triangles}")]
+    AtlasSize {
+        /// Triangles the atlas places.
+        atlas: usize,
+        /// Triangles of the scene.
+        triangles: usize,
+    },
+    /// A triangle names a surface past the list.
+    #[error("a triangle names surface {surface} of {surfaces}")]
+    UnknownSurface {
+        /// The surface index.
+        surface: usize,
+        /// Surfaces in the scene.
+        surfaces: usize,
+    },
+    /// A draw's range past the data it indexes.
+    #[error("range {start}..{end} is past the {len} {of}")]
+    DrawRange {
+        /// First index of the range.
+        start: u64,
+        /// One past its last.
+        end: u64,
+        /// Length of the data.
+        len: usize,
+        /// What it indexes.
+        of: &'static str,
+    },
+    /// A texture whose bytes do not fill its size.
+    #[error("texture {texture:?} has {bytes} bytes for {width}×{height} texels")]
+    TextureBytes {
+        /// The texture's name.
+        texture: String,
+        /// Bytes given.
+        bytes: usize,
+        /// Width.
+        width: u32,
+        /// Height.
+        height: u32,
+    },
+    /// More light-map pages than the adapter has texture layers.
+    #[error("a light map of {pages} pages, past the adapter's {max} texture layers")]
+    LightMapPages {
+        /// Pages.
+        pages: u32,
+        /// The adapter's limit.
+        max: u32,
+    },
+    /// A vertex on a light-map page the map does not have.
+    #[error("a vertex on light-map page {page} of {pages}")]
+    LightMapPage {
+        /// The page.
+        page: u32,
+        /// Pages of the map.
+        pages: u32,
+    },
+}
 pub use crate::instancing::InstanceData;
 use crate::material::{DrawRange, GpuMaterial, RenderMaterial, RenderTexture, TextureCache};
 
@@ -216,11 +277,11 @@ impl RenderScene {
         atlas: radiant_scene::atlas::Atlas,
     ) -> Result<Self, RenderError> {
         if atlas.uv.len() != scene.triangles.len() || atlas.page.len() != scene.triangles.len() {
-            return Err(RenderError::InvalidScene(format!(
-                "an atlas of {} triangles for a scene of {}",
-                atlas.uv.len(),
-                scene.triangles.len()
-            )));
+            return Err(SceneError::AtlasSize {
+                atlas: atlas.uv.len().min(atlas.page.len()),
+                triangles: scene.triangles.len(),
+            }
+            .into());
         }
         Self::build(scene, atlas, true)
     }
@@ -266,11 +327,11 @@ impl RenderScene {
             .iter()
             .find(|t| t.surface as usize >= scene.surfaces.len())
         {
-            return Err(RenderError::InvalidScene(format!(
-                "a triangle names surface {} of {}",
-                t.surface,
-                scene.surfaces.len()
-            )));
+            return Err(SceneError::UnknownSurface {
+                surface: t.surface as usize,
+                surfaces: scene.surfaces.len(),
+            }
+            .into());
         }
         if !(lo.is_finite() && hi.is_finite()) {
             return Err(RenderError::NonFinite("vertex data"));
@@ -754,19 +815,22 @@ impl GpuScene {
         let instance_count = scene.instances.len().max(1) as u64;
         for d in draws {
             if u64::from(d.first) + u64::from(d.count) > scene.indices.len() as u64 {
-                return Err(RenderError::InvalidScene(format!(
-                    "draw range {}..{} is past the {} indices",
-                    d.first,
-                    u64::from(d.first) + u64::from(d.count),
-                    scene.indices.len()
-                )));
+                return Err(SceneError::DrawRange {
+                    start: d.first.into(),
+                    end: u64::from(d.first) + u64::from(d.count),
+                    len: scene.indices.len(),
+                    of: "indices",
+                }
+                .into());
             }
             if u64::from(d.first_instance) + u64::from(d.instance_count) > instance_count {
-                return Err(RenderError::InvalidScene(format!(
-                    "instances {}..{} are past the {instance_count} instances",
-                    d.first_instance,
-                    u64::from(d.first_instance) + u64::from(d.instance_count),
-                )));
+                return Err(SceneError::DrawRange {
+                    start: d.first_instance.into(),
+                    end: u64::from(d.first_instance) + u64::from(d.instance_count),
+                    len: instance_count as usize,
+                    of: "instances",
+                }
+                .into());
             }
         }
         let mut instance_data: Vec<InstanceData> = if scene.instances.is_empty() {
@@ -789,13 +853,13 @@ impl GpuScene {
                 || t.width == 0
                 || t.height == 0
             {
-                return Err(RenderError::InvalidScene(format!(
-                    "texture {:?} has {} bytes for {}×{} texels",
-                    t.name,
-                    t.pixels.len(),
-                    t.width,
-                    t.height
-                )));
+                return Err(SceneError::TextureBytes {
+                    texture: t.name.clone(),
+                    bytes: t.pixels.len(),
+                    width: t.width,
+                    height: t.height,
+                }
+                .into());
             }
         }
         // Each draw's vertices in draw order: draws become plain vertex ranges.
@@ -817,12 +881,13 @@ impl GpuScene {
                     if u64::from(inst.lightmap[0]) + u64::from(d.count)
                         > scene.instance_uvs.len() as u64
                     {
-                        return Err(RenderError::InvalidScene(format!(
-                            "a copy's light-map coordinates {}..{} are past the {} given",
-                            inst.lightmap[0],
-                            u64::from(inst.lightmap[0]) + u64::from(d.count),
-                            scene.instance_uvs.len()
-                        )));
+                        return Err(SceneError::DrawRange {
+                            start: inst.lightmap[0].into(),
+                            end: u64::from(inst.lightmap[0]) + u64::from(d.count),
+                            len: scene.instance_uvs.len(),
+                            of: "copies' light-map coordinates",
+                        }
+                        .into());
                     }
                 }
             }
@@ -935,10 +1000,11 @@ impl GpuScene {
                     });
                 }
                 if lm.pages > limits.max_texture_array_layers {
-                    return Err(RenderError::InvalidScene(format!(
-                        "a light map of {} pages, past the adapter's {} texture layers",
-                        lm.pages, limits.max_texture_array_layers
-                    )));
+                    return Err(SceneError::LightMapPages {
+                        pages: lm.pages,
+                        max: limits.max_texture_array_layers,
+                    }
+                    .into());
                 }
                 (
                     lm.width,
@@ -960,9 +1026,11 @@ impl GpuScene {
             .chain(scene.instance_uvs.iter().map(|u| u.page))
             .find(|&p| p >= layers);
         if let Some(p) = page {
-            return Err(RenderError::InvalidScene(format!(
-                "a vertex on light-map page {p} of {layers}"
-            )));
+            return Err(SceneError::LightMapPage {
+                page: p,
+                pages: layers,
+            }
+            .into());
         }
         let lightmap = crate::util::sampled_texture_array(
             dev,

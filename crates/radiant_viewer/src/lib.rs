@@ -257,7 +257,7 @@ impl Viewer {
             ));
         let surface = instance
             .create_surface(window.clone())
-            .map_err(|e| RenderError::Gpu(format!("cannot create a surface: {e}")))?;
+            .map_err(RenderError::Surface)?;
         let gpu = pollster::block_on(GpuContext::from_instance(instance, Some(&surface)))?;
         let size = window.inner_size();
         let caps = surface.get_capabilities(&gpu.adapter);
@@ -267,7 +267,7 @@ impl Viewer {
             .formats
             .first()
             .copied()
-            .ok_or_else(|| RenderError::Gpu("the surface supports no format".into()))?;
+            .ok_or(RenderError::NoSurfaceFormat)?;
         let linear = preferred.remove_srgb_suffix();
         let view_formats_ok = gpu
             .adapter

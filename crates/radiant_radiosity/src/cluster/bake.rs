@@ -13,7 +13,6 @@ use super::tree::Tree;
 use super::{
     Budget, COARSEN_STEPS, ClusterParams, ClusterReport, Phase, Sweep, Watch, check, refine,
 };
-use crate::BakeError;
 use crate::checkpoint::CheckpointError;
 use crate::input::{self, Lighting};
 use crate::mesh::Mesh;
@@ -25,6 +24,7 @@ use crate::smooth::{SmoothField, element_emission};
 use crate::solve::{Info, SolveError, Stall};
 use crate::solvers::SolverKind;
 use crate::system::{Rgb, System};
+use crate::{BakeError, ParameterError};
 
 /// A clustered bake in progress: the mesh, the cluster tree and the links at every level, and
 /// the Jacobi sweeps over them.
@@ -422,11 +422,11 @@ impl ClusterBake {
     /// when the edit turns a bake with no emitters into one with some: it has no links.
     pub fn edit_surfaces(&mut self, surfaces: &[Surface]) -> Result<(), BakeError> {
         if surfaces.len() != self.surfaces.len() {
-            return Err(BakeError::InvalidParameter(format!(
-                "an edit must keep the {} surfaces ({} given)",
-                self.surfaces.len(),
-                surfaces.len()
-            )));
+            return Err(ParameterError::SurfaceCount {
+                expected: self.surfaces.len(),
+                given: surfaces.len(),
+            }
+            .into());
         }
         input::validate_surfaces(surfaces)?;
         let (rho, source) = self.lighting.terms(surfaces, &self.mesh);

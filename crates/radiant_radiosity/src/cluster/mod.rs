@@ -41,7 +41,6 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use radiant_scene::Scene;
 
-use crate::BakeError;
 use crate::form_factors::FormFactorKind;
 use crate::mesh::Mesh;
 use crate::params::BakeParams;
@@ -49,6 +48,7 @@ use crate::report::BakeResult;
 use crate::solve::Info;
 use crate::solvers::SolverKind;
 use crate::system::Rgb;
+use crate::{BakeError, ParameterError};
 
 /// Settings of the clustered hierarchy that the per-triangle bake does not have.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -243,25 +243,22 @@ pub fn bake_watched(
 }
 
 fn check(params: &BakeParams, cp: &ClusterParams) -> Result<(), BakeError> {
-    let bad = |s: String| Err(BakeError::InvalidParameter(s));
     params.check()?;
     if !matches!(
         params.form_factors,
         FormFactorKind::Analytic | FormFactorKind::RayCast
     ) {
-        return bad(format!(
-            "the clustered hierarchy computes form factors analytic or ray-cast, not {}: use --hierarchy triangles for it",
-            params.form_factors.name()
-        ));
+        return Err(ParameterError::FormFactors {
+            method: params.form_factors.name(),
+        }
+        .into());
     }
     if cp.samples == 0 || cp.samples > 1024 {
-        return bad(format!(
-            "{} visibility samples per link: use 1 to 1024",
-            cp.samples
-        ));
+        let samples = f64::from(cp.samples);
+        return Err(ParameterError::out_of_range("visibility samples", samples, "1..=1024").into());
     }
     if cp.memory_limit == Some(0) {
-        return bad("a memory limit of 0 bytes".into());
+        return Err(ParameterError::out_of_range("memory limit", 0.0, "(0, inf) bytes").into());
     }
     Ok(())
 }
