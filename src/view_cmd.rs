@@ -98,7 +98,7 @@ pub(crate) fn run(args: &ViewArgs) -> anyhow::Result<()> {
     };
     let report = radiant_viewer::run(options)?;
     println!(
-        "radiant viewer: {} frames, median {} ms per frame; bake {}{}",
+        "radiant viewer: {} frames, median {} ms per frame; bake {:?}{}",
         report.frames,
         report
             .median_frame_ms

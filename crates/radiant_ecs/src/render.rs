@@ -82,7 +82,7 @@ pub struct RenderState {
     /// Settings of the last frame.
     pub settings: Option<FrameSettings>,
     /// The last error, if rendering failed.
-    pub error: Option<String>,
+    pub error: Option<Arc<RenderError>>,
     /// The last measured pass times ([`render_to`] with `timed`).
     pub timings: Option<radiant_render::graph::PassTimings>,
     /// The light map's atlas as last uploaded.
@@ -509,7 +509,7 @@ pub fn render_frame(world: &mut World) {
     let result = render_offscreen(world);
     if let Err(e) = result {
         tracing::error!("frame not rendered: {e}");
-        world.resource_mut::<RenderState>().error = Some(e.to_string());
+        world.resource_mut::<RenderState>().error = Some(Arc::new(e));
     }
 }
 

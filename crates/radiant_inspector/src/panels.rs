@@ -5,7 +5,7 @@
 use bevy_ecs::prelude::*;
 use egui::{Color32, RichText, Ui};
 use egui_plot::{Line, Plot, PlotPoints};
-use radiant_ecs::bake::{BakeControl, BakePhase, BakeStatus, RadiosityBake};
+use radiant_ecs::bake::{BakeControl, BakeStatus, RadiosityBake};
 use radiant_ecs::render::{Bloom, DebugView, GaussianBlur, RenderState, Sobel, Ssao, Tonemapping};
 use radiant_ecs::scene::{Material, PunctualLight, SceneCamera, SceneSky, SurfaceOrder};
 use radiant_scene::LightKind;
@@ -355,19 +355,6 @@ pub fn post_panel(ui: &mut Ui, world: &mut World, _state: &mut InspectorState) {
     effect::<Sobel>(ui, world, camera, "Sobel edges");
 }
 
-fn phase_name(p: BakePhase) -> &'static str {
-    match p {
-        BakePhase::Idle => "idle",
-        BakePhase::NoEmitters => "nothing to bake (no emitters)",
-        BakePhase::Building => "building links",
-        BakePhase::Solving => "solving",
-        BakePhase::Converged => "converged",
-        BakePhase::Paused => "paused",
-        BakePhase::Cancelled => "cancelled",
-        BakePhase::Failed => "failed",
-    }
-}
-
 /// Radiosity: method, patch size and budget (a change rebakes); pause, resume, rebake,
 /// cancel; progress, ETA and the stale flag; the estimated error against time.
 pub fn radiosity_panel(ui: &mut Ui, world: &mut World, _state: &mut InspectorState) {
@@ -406,7 +393,7 @@ pub fn radiosity_panel(ui: &mut Ui, world: &mut World, _state: &mut InspectorSta
     });
     ui.label(format!(
         "{}{}",
-        phase_name(status.phase),
+        status.phase.name(),
         if status.stale {
             " · stale: an edit is being baked"
         } else {

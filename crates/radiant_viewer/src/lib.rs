@@ -11,32 +11,36 @@
 //! falls back to a headless bake and render when it cannot.
 
 pub mod camera;
+mod gui;
+mod input;
+mod surface;
+mod timing;
 
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use bevy_ecs::prelude::*;
-use egui_wgpu::ScreenDescriptor;
 use glam::DVec3;
 use radiant_ecs::bake::{BakeControl, BakePhase, BakeStatus, RadiosityBake};
 use radiant_ecs::prelude::{App, RadiantPlugins, spawn_scene};
 use radiant_ecs::render::{
     Bloom, Gpu, RenderPlugin, RenderSettings, RenderState, Ssao, Tonemapping,
-    apply_pending_overlay, render_to, set_overlay,
+    apply_pending_overlay, render_to,
 };
 use radiant_ecs::scene::SceneCamera;
-use radiant_inspector::InspectorState;
-use radiant_post::overlay::Overlay;
 use radiant_render::{GpuContext, RenderError, wgpu};
 use radiant_scene::Scene;
 use winit::application::ApplicationHandler;
-use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
+use winit::event::WindowEvent;
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
-use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::camera::OrbitCamera;
+use crate::gui::Gui;
+use crate::input::{Action, Input};
+use crate::surface::SurfaceState;
+use crate::timing::FrameTimer;
 
 /// What can stop the viewer.
 #[derive(Debug, thiserror::Error)]
@@ -112,7 +116,7 @@ pub struct ViewerReport {
     /// The last measured per-pass times (GPU timestamps where available).
     pub pass_ms: Vec<(&'static str, f64)>,
     /// Where the bake stood at exit.
-    pub bake_phase: String,
+    pub bake_phase: BakePhase,
     /// The checkpoint written, if any.
     pub checkpoint: Option<PathBuf>,
 }
@@ -140,91 +144,18 @@ pub fn run(options: ViewerOptions) -> Result<ViewerReport, ViewerError> {
     }
 }
 
-/// egui drawn as the render graph's last pass (see `radiant_post::overlay`).
-struct EguiOverlay {
-    frame: Mutex<EguiFrame>,
-}
-
-struct EguiFrame {
-    renderer: egui_wgpu::Renderer,
-    jobs: Vec<egui::ClippedPrimitive>,
-    textures: egui::TexturesDelta,
-    to_free: Vec<egui::TextureId>,
-    pixels_per_point: f32,
-}
-
-impl EguiOverlay {
-    fn lock(&self) -> std::sync::MutexGuard<'_, EguiFrame> {
-        match self.frame.lock() {
-            Ok(g) => g,
-            Err(poisoned) => poisoned.into_inner(),
-        }
-    }
-}
-
-impl Overlay for EguiOverlay {
-    fn prepare(
-        &self,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        encoder: &mut wgpu::CommandEncoder,
-        (width, height): (u32, u32),
-    ) {
-        let mut f = self.lock();
-        let f = &mut *f;
-        for id in f.to_free.drain(..) {
-            f.renderer.free_texture(&id);
-        }
-        let mut delta = std::mem::take(&mut f.textures);
-        for (id, images) in &delta.set {
-            for image in images {
-                f.renderer.update_texture(device, queue, *id, image);
-            }
-        }
-        f.to_free = delta.free.iter().copied().collect();
-        delta.clear();
-        let screen = ScreenDescriptor {
-            size_in_pixels: [width, height],
-            pixels_per_point: f.pixels_per_point,
-        };
-        let extra = f
-            .renderer
-            .update_buffers(device, queue, encoder, &f.jobs, &screen);
-        if !extra.is_empty() {
-            queue.submit(extra);
-        }
-    }
-
-    fn draw(&self, pass: &mut wgpu::RenderPass<'static>, (width, height): (u32, u32)) {
-        let f = self.lock();
-        let screen = ScreenDescriptor {
-            size_in_pixels: [width, height],
-            pixels_per_point: f.pixels_per_point,
-        };
-        f.renderer.render(pass, &f.jobs, &screen);
-    }
-}
-
+/// A window being shown: the parts wgpu's example framework keeps apart (surface, frame
+/// timing, input), the GUI, the ECS app, and the camera.
 struct Running {
     window: Arc<Window>,
-    surface: wgpu::Surface<'static>,
-    config: wgpu::SurfaceConfiguration,
+    surface: SurfaceState,
     app: App,
-    egui_ctx: egui::Context,
-    egui_state: egui_winit::State,
-    overlay: Arc<EguiOverlay>,
-    inspector: InspectorState,
-    show_inspector: bool,
+    gui: Gui,
     camera: OrbitCamera,
     camera_entity: Option<Entity>,
-    drag: Option<MouseButton>,
-    cursor: Option<(f64, f64)>,
-    keys: std::collections::HashSet<KeyCode>,
+    input: Input,
+    timer: FrameTimer,
     minimised: bool,
-    reconfigure: bool,
-    last_frame: Instant,
-    last_title: Instant,
-    frames: u64,
 }
 
 struct Viewer {
@@ -260,72 +191,34 @@ impl Viewer {
             .map_err(RenderError::Surface)?;
         let gpu = pollster::block_on(GpuContext::from_instance(instance, Some(&surface)))?;
         let size = window.inner_size();
-        let caps = surface.get_capabilities(&gpu.adapter);
-        // egui blends correctly only into a linear-format target, the 3D frame wants sRGB:
-        // configure the linear format and view it as sRGB when the inspector is hidden.
-        let preferred = caps
-            .formats
-            .first()
-            .copied()
-            .ok_or(RenderError::NoSurfaceFormat)?;
-        let linear = preferred.remove_srgb_suffix();
-        let view_formats_ok = gpu
-            .adapter
-            .get_downlevel_capabilities()
-            .flags
-            .contains(wgpu::DownlevelFlags::SURFACE_VIEW_FORMATS);
-        let format = if view_formats_ok && caps.formats.contains(&linear) {
-            linear
-        } else {
-            preferred
-        };
-        let srgb = format.add_srgb_suffix();
-        let config = wgpu::SurfaceConfiguration {
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-            format,
-            width: size.width.max(1),
-            height: size.height.max(1),
-            present_mode: wgpu::PresentMode::AutoVsync,
-            desired_maximum_frame_latency: 2,
-            alpha_mode: caps
-                .alpha_modes
-                .first()
-                .copied()
-                .unwrap_or(wgpu::CompositeAlphaMode::Auto),
-            view_formats: if srgb != format { vec![srgb] } else { vec![] },
-            color_space: Default::default(),
-        };
-        surface.configure(&gpu.device, &config);
-        gpu.take_errors()?;
+        let surface = SurfaceState::new(&gpu, surface, (size.width, size.height))?;
+        let (width, height) = surface.size();
         tracing::info!(
-            "window {}×{} on {} ({:?}), surface {:?}",
-            config.width,
-            config.height,
+            "window {width}×{height} on {} ({:?}), surface {:?}",
             gpu.info.name,
             gpu.info.backend,
-            format
+            surface.format()
         );
+        let mut gui = Gui::new(&window, &gpu.device, surface.format());
+        let mut app = self.app(gpu);
+        let (camera, camera_entity) = viewer_camera(&mut app.world, &self.options.scene);
+        gui.show(&mut app.world, self.options.inspector);
+        Ok(Running {
+            window,
+            surface,
+            app,
+            gui,
+            camera,
+            camera_entity,
+            input: Input::default(),
+            timer: FrameTimer::new(),
+            minimised: false,
+        })
+    }
 
-        let renderer = egui_wgpu::Renderer::new(&gpu.device, format, Default::default());
-        let egui_ctx = egui::Context::default();
-        let egui_state = egui_winit::State::new(
-            egui_ctx.clone(),
-            egui::ViewportId::ROOT,
-            &window,
-            Some(window.scale_factor() as f32),
-            None,
-            Some(gpu.device.limits().max_texture_dimension_2d as usize),
-        );
-        let overlay = Arc::new(EguiOverlay {
-            frame: Mutex::new(EguiFrame {
-                renderer,
-                jobs: Vec::new(),
-                textures: Default::default(),
-                to_free: Vec::new(),
-                pixels_per_point: window.scale_factor() as f32,
-            }),
-        });
-
+    /// The ECS app: Radiant's plugins and the renderer on `gpu`, the scene spawned, the bake
+    /// set up.
+    fn app(&self, gpu: GpuContext) -> App {
         let mut app = App::new();
         app.add_plugins(RadiantPlugins)
             .add_plugins(RenderPlugin)
@@ -336,61 +229,9 @@ impl Viewer {
                 ..RenderSettings::default()
             })
             .insert_resource(self.options.bake.clone());
-        let scene = &self.options.scene;
-        spawn_scene(&mut app.world, scene);
+        spawn_scene(&mut app.world, &self.options.scene);
         app.finish();
-        let mut q = app.world.query_filtered::<Entity, With<SceneCamera>>();
-        let mut camera_entity = q.iter(&app.world).next();
-        if camera_entity.is_none() {
-            // A scene without a camera gets one looking at it, so the controls work.
-            let orbit = initial_camera(&mut app.world, None, scene);
-            camera_entity = Some(
-                app.world
-                    .spawn((
-                        Name::new("viewer camera"),
-                        radiant_ecs::scene::Transform::IDENTITY,
-                        SceneCamera(radiant_scene::Camera {
-                            position: orbit.position(),
-                            forward: orbit.forward(),
-                            up: orbit.up,
-                            yfov: 0.7,
-                        }),
-                    ))
-                    .id(),
-            );
-        }
-        if let Some(e) = camera_entity {
-            app.world.entity_mut(e).insert((
-                Bloom::default(),
-                Ssao::default(),
-                Tonemapping::default(),
-            ));
-        }
-        let camera = initial_camera(&mut app.world, camera_entity, scene);
-        if self.options.inspector {
-            set_overlay(&mut app.world, Some(overlay.clone() as Arc<dyn Overlay>));
-        }
-        Ok(Running {
-            window,
-            surface,
-            config,
-            app,
-            egui_ctx,
-            egui_state,
-            overlay,
-            inspector: InspectorState::default(),
-            show_inspector: self.options.inspector,
-            camera,
-            camera_entity,
-            drag: None,
-            cursor: None,
-            keys: Default::default(),
-            minimised: false,
-            reconfigure: false,
-            last_frame: Instant::now(),
-            last_title: Instant::now(),
-            frames: 0,
-        })
+        app
     }
 
     /// Pauses the bake so that it writes its checkpoint, waiting at most a few seconds.
@@ -412,25 +253,54 @@ impl Viewer {
                 std::thread::sleep(Duration::from_millis(5));
             }
         }
-        let status = r.app.world.resource::<BakeStatus>().clone();
-        self.report.frames = r.frames;
-        self.report.median_frame_ms = r.inspector.median_frame_ms();
-        self.report.pass_ms = r
-            .app
-            .world
-            .resource::<RenderState>()
-            .timings
-            .as_ref()
-            .map(|t| t.passes.clone())
-            .unwrap_or_default();
-        self.report.bake_phase = format!("{:?}", status.phase);
-        self.report.checkpoint = r
-            .app
-            .world
-            .get_resource::<RadiosityBake>()
-            .and_then(|b| b.checkpoint.clone())
-            .filter(|p| p.exists());
+        let world = &r.app.world;
+        self.report = ViewerReport {
+            frames: r.timer.frames(),
+            median_frame_ms: r.gui.inspector.median_frame_ms(),
+            pass_ms: world
+                .resource::<RenderState>()
+                .timings
+                .as_ref()
+                .map(|t| t.passes.clone())
+                .unwrap_or_default(),
+            bake_phase: world.resource::<BakeStatus>().phase,
+            checkpoint: world
+                .get_resource::<RadiosityBake>()
+                .and_then(|b| b.checkpoint.clone())
+                .filter(|p| p.exists()),
+        };
     }
+}
+
+/// The camera the viewer moves: the scene's, or one spawned looking at the scene; with the
+/// default effects on it.
+fn viewer_camera(world: &mut World, scene: &Scene) -> (OrbitCamera, Option<Entity>) {
+    let mut q = world.query_filtered::<Entity, With<SceneCamera>>();
+    let mut camera_entity = q.iter(world).next();
+    if camera_entity.is_none() {
+        // A scene without a camera gets one looking at it, so the controls work.
+        let orbit = initial_camera(world, None, scene);
+        camera_entity = Some(
+            world
+                .spawn((
+                    Name::new("viewer camera"),
+                    radiant_ecs::scene::Transform::IDENTITY,
+                    SceneCamera(radiant_scene::Camera {
+                        position: orbit.position(),
+                        forward: orbit.forward(),
+                        up: orbit.up,
+                        yfov: 0.7,
+                    }),
+                ))
+                .id(),
+        );
+    }
+    if let Some(e) = camera_entity {
+        world
+            .entity_mut(e)
+            .insert((Bloom::default(), Ssao::default(), Tonemapping::default()));
+    }
+    (initial_camera(world, camera_entity, scene), camera_entity)
 }
 
 /// The orbit camera that reproduces the scene camera, orbiting the scene's centre.
@@ -481,113 +351,36 @@ impl Running {
         }
     }
 
-    fn fly(&mut self, dt: f64) {
-        let k = |code: KeyCode| f64::from(u8::from(self.keys.contains(&code)));
-        let right = k(KeyCode::KeyD) - k(KeyCode::KeyA);
-        let up = k(KeyCode::KeyE) - k(KeyCode::KeyQ);
-        let forward = k(KeyCode::KeyW) - k(KeyCode::KeyS);
-        if right != 0.0 || up != 0.0 || forward != 0.0 {
-            let speed = 0.8 * dt;
-            self.camera.fly(right * speed, up * speed, forward * speed);
-        }
-    }
-
     fn resize(&mut self, width: u32, height: u32) {
         self.minimised = width == 0 || height == 0;
-        if self.minimised {
-            return;
-        }
-        self.config.width = width;
-        self.config.height = height;
         let gpu = &self.app.world.resource::<Gpu>().0;
-        self.surface.configure(&gpu.device, &self.config);
-    }
-
-    fn set_inspector(&mut self, on: bool) {
-        self.show_inspector = on;
-        let overlay = on.then(|| self.overlay.clone() as Arc<dyn Overlay>);
-        set_overlay(&mut self.app.world, overlay);
+        self.surface.resize(gpu, width, height);
     }
 
     /// One frame: ECS update (the bake's progress, edits, light-map uploads), the inspector,
-    /// the render graph into the surface, present.
+    /// the render graph into the surface, present. False when no frame was presented.
     fn redraw(&mut self) -> Result<bool, RenderError> {
         let now = Instant::now();
-        let dt = now.duration_since(self.last_frame).as_secs_f64().min(0.1);
-        self.fly(dt);
+        self.input.fly(self.timer.dt(now), &mut self.camera);
         self.write_camera();
         self.app.update();
         apply_pending_overlay(&mut self.app.world);
-
-        if self.show_inspector {
-            let input = self.egui_state.take_egui_input(&self.window);
-            let world = &mut self.app.world;
-            let inspector = &mut self.inspector;
-            let output = self.egui_ctx.run_ui(input, |ui| {
-                egui::Panel::right("radiant_inspector")
-                    .default_size(320.0)
-                    .show(ui, |ui| {
-                        radiant_inspector::inspector_ui(ui, world, inspector)
-                    });
-            });
-            self.egui_state
-                .handle_platform_output(&self.window, output.platform_output);
-            let jobs = self
-                .egui_ctx
-                .tessellate(output.shapes, output.pixels_per_point);
-            let mut f = self.overlay.lock();
-            f.jobs = jobs;
-            f.textures.append(output.textures_delta);
-            f.pixels_per_point = output.pixels_per_point;
-        }
-
-        let frame = {
-            let gpu = &self.app.world.resource::<Gpu>().0;
-            match self.surface.get_current_texture() {
-                wgpu::CurrentSurfaceTexture::Success(t) => t,
-                wgpu::CurrentSurfaceTexture::Suboptimal(t) => {
-                    // Reconfigure after presenting: not while this texture is held.
-                    self.reconfigure = true;
-                    t
-                }
-                wgpu::CurrentSurfaceTexture::Timeout | wgpu::CurrentSurfaceTexture::Occluded => {
-                    return Ok(false);
-                }
-                wgpu::CurrentSurfaceTexture::Outdated | wgpu::CurrentSurfaceTexture::Lost => {
-                    self.surface.configure(&gpu.device, &self.config);
-                    return Ok(false);
-                }
-                wgpu::CurrentSurfaceTexture::Validation => {
-                    gpu.take_errors()?;
-                    return Ok(false);
-                }
-            }
+        self.gui.run(&self.window, &mut self.app.world);
+        let Some(frame) = self.surface.acquire(&self.app.world.resource::<Gpu>().0)? else {
+            return Ok(false);
         };
         // With the inspector, the overlay pass encodes into the linear format egui wants;
         // without, the frame goes straight into an sRGB view.
-        let format = if self.show_inspector {
-            self.config.format
-        } else {
-            self.config.format.add_srgb_suffix()
-        };
-        let view = frame.texture.create_view(&wgpu::TextureViewDescriptor {
-            format: Some(format),
-            ..Default::default()
-        });
+        let (view, format) = self.surface.view(&frame, self.gui.shown());
         // Per-pass times now and then: measuring waits for the GPU.
-        let timed = self.frames % 60 == 1;
-        match render_to(
-            &mut self.app.world,
-            &view,
-            (self.config.width, self.config.height),
-            format,
-            timed,
-        ) {
+        let timed = self.timer.frames() % 60 == 1;
+        let world = &mut self.app.world;
+        match render_to(world, &view, self.surface.size(), format, timed) {
             Ok(()) => {}
             Err(e @ RenderError::InvalidSetting { .. }) => {
                 // A setting the renderer refuses: say so in the inspector, keep the window.
                 tracing::warn!("frame skipped: {e}");
-                self.app.world.resource_mut::<RenderState>().error = Some(e.to_string());
+                world.resource_mut::<RenderState>().error = Some(Arc::new(e));
                 return Ok(false);
             }
             Err(e) => return Err(e),
@@ -596,26 +389,18 @@ impl Running {
         // No wait for the GPU here (the timed frames wait anyway); errors of this frame show
         // up in a later one.
         gpu.poll_errors()?;
-        gpu.queue.present(frame);
-        if std::mem::take(&mut self.reconfigure) {
-            self.surface.configure(&gpu.device, &self.config);
-        }
-        self.frames += 1;
-        let ms = now.duration_since(self.last_frame).as_secs_f64() * 1e3;
-        if self.frames > 1 {
-            self.inspector.record_frame(ms);
-        }
-        self.last_frame = now;
-        if self.frames == 1 {
+        self.surface.present(gpu, frame);
+        if let Some(ms) = self.timer.presented(now) {
+            self.gui.inspector.record_frame(ms);
+        } else {
             tracing::info!("first frame presented");
             eprintln!("radiant viewer: first frame presented");
         }
-        if now.duration_since(self.last_title) > Duration::from_millis(500) {
-            self.last_title = now;
+        if self.timer.title_due(now) {
             let s = self.app.world.resource::<BakeStatus>();
             self.window.set_title(&format!(
-                "Radiant: {:?} {:.0} %{}",
-                s.phase,
+                "Radiant: {} {:.0} %{}",
+                s.phase.name(),
                 s.progress.fraction * 100.0,
                 if s.stale { " (stale)" } else { "" }
             ));
@@ -645,89 +430,43 @@ impl ApplicationHandler for Viewer {
         let Some(r) = self.state.as_mut() else {
             return;
         };
-        let consumed = r.show_inspector && r.egui_state.on_window_event(&r.window, &event).consumed;
+        let consumed = r.gui.on_event(&r.window, &event);
         match event {
             WindowEvent::CloseRequested => {
                 self.close();
                 event_loop.exit();
+                return;
             }
             WindowEvent::Resized(size) => r.resize(size.width, size.height),
             WindowEvent::Occluded(occluded) => r.minimised = occluded,
-            WindowEvent::RedrawRequested => {
-                if r.minimised {
+            WindowEvent::RedrawRequested if !r.minimised => {
+                if let Err(e) = r.redraw() {
+                    self.close();
+                    self.fail(event_loop, e.into());
                     return;
-                }
-                match r.redraw() {
-                    Ok(_) => {}
-                    Err(e) => {
-                        self.close();
-                        self.fail(event_loop, e.into());
-                        return;
-                    }
                 }
                 let done = self
                     .options
                     .exit_after_frames
-                    .is_some_and(|n| r.frames >= n);
+                    .is_some_and(|n| r.timer.frames() >= n);
                 if done {
                     self.close();
                     event_loop.exit();
                 }
-            }
-            WindowEvent::Focused(false) => {
-                // Releases that happen elsewhere never arrive: forget what is held.
-                r.keys.clear();
-                r.drag = None;
-            }
-            WindowEvent::KeyboardInput { event, .. } => {
-                if let PhysicalKey::Code(code) = event.physical_key {
-                    match event.state {
-                        ElementState::Pressed if consumed => {}
-                        ElementState::Pressed => {
-                            if matches!(code, KeyCode::Tab | KeyCode::F1) && !event.repeat {
-                                let on = !r.show_inspector;
-                                r.set_inspector(on);
-                            }
-                            if code == KeyCode::Escape {
-                                self.close();
-                                event_loop.exit();
-                                return;
-                            }
-                            r.keys.insert(code);
-                        }
-                        ElementState::Released => {
-                            r.keys.remove(&code);
-                        }
-                    }
-                }
-            }
-            WindowEvent::MouseInput { state, button, .. } => {
-                if state == ElementState::Pressed && !consumed {
-                    r.drag = Some(button);
-                } else if state == ElementState::Released {
-                    r.drag = None;
-                }
-            }
-            WindowEvent::CursorMoved { position, .. } => {
-                let p = (position.x, position.y);
-                if let (Some(button), Some(last)) = (r.drag, r.cursor) {
-                    let (dx, dy) = (p.0 - last.0, p.1 - last.1);
-                    match button {
-                        MouseButton::Left => r.camera.orbit(dx, dy),
-                        MouseButton::Right => r.camera.look(dx, dy),
-                        _ => {}
-                    }
-                }
-                r.cursor = Some(p);
-            }
-            WindowEvent::MouseWheel { delta, .. } if !consumed => {
-                let steps = match delta {
-                    MouseScrollDelta::LineDelta(_, y) => f64::from(y),
-                    MouseScrollDelta::PixelDelta(p) => p.y / 40.0,
-                };
-                r.camera.zoom(steps);
+                return;
             }
             _ => {}
+        }
+        match r.input.on_event(&event, consumed, &mut r.camera) {
+            Some(Action::ToggleInspector) => {
+                let on = !r.gui.shown();
+                r.gui.show(&mut r.app.world, on);
+            }
+            Some(Action::Close) => {
+                self.close();
+                event_loop.exit();
+            }
+            None => {}
         }
     }
 

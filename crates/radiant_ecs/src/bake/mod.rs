@@ -97,6 +97,22 @@ pub enum BakePhase {
     Failed,
 }
 
+impl BakePhase {
+    /// What the phase is, in words (the inspector's and the window title's).
+    pub fn name(self) -> &'static str {
+        match self {
+            BakePhase::Idle => "idle",
+            BakePhase::NoEmitters => "nothing to bake (no emitters)",
+            BakePhase::Building => "building links",
+            BakePhase::Solving => "solving",
+            BakePhase::Converged => "converged",
+            BakePhase::Paused => "paused",
+            BakePhase::Cancelled => "cancelled",
+            BakePhase::Failed => "failed",
+        }
+    }
+}
+
 /// Progress of the current phase.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct BakeProgress {
