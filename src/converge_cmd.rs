@@ -356,6 +356,64 @@ fn path_traced(
     ))
 }
 
+/// One clustered bake at refinement `r`: its time and error against `reference`, its row in
+/// `csv`; `None` when the bake stopped (over the memory limit, say), which it says.
+fn clustered_point(
+    args: &ConvergeArgs,
+    scene: &radiant::scene::Scene,
+    ff: FormFactorKind,
+    r: f64,
+    reference: &[(String, Rgb)],
+    csv: &mut String,
+) -> anyhow::Result<Option<(f64, metrics::ErrorStats)>> {
+    use radiant::radiosity::cluster::{self, ClusterParams};
+    let label = format!("clustered / {}", ff.name());
+    let mut params = args.solve.params(SolverKind::Jacobi, ff)?;
+    params.links.refinement = r;
+    let cp = ClusterParams {
+        memory_limit: args.memory_limit,
+        ..ClusterParams::default()
+    };
+    let pb = progress_bar(1, &format!("{label}, refinement {r}"));
+    let t = Instant::now();
+    let result = cluster::bake(scene, &params, &cp, &|_, done, total| {
+        pb.set_length(total as u64);
+        pb.set_position(done as u64);
+    });
+    let t_s = t.elapsed().as_secs_f64();
+    pb.finish_and_clear();
+    let result = match result {
+        Ok(x) => x,
+        Err(e) => {
+            println!("{label}, refinement {r}: stopped: {e}");
+            return Ok(None);
+        }
+    };
+    let e = metrics::compare_surfaces(&result.surfaces, reference)?;
+    let rep = &result.report;
+    let _ = writeln!(
+        csv,
+        "clustered,{},{r},{t_s:.6},{},{:.6e},{:.6e},{:.6e},{:.6e},{},{}",
+        ff.name(),
+        rep.iterations,
+        e.rel_rms,
+        e.max_rel,
+        rep.residual,
+        e.mean_rel,
+        rep.elements,
+        rep.links
+    );
+    println!(
+        "{label:24} refinement {r:<6} {t_s:>8.2} s  mean {:6.3} %  max {:6.3} %  rms {:6.3} %  {} elements, {} links",
+        e.mean_rel * 100.0,
+        e.max_rel * 100.0,
+        e.rel_rms * 100.0,
+        rep.elements,
+        rep.links
+    );
+    Ok(Some((t_s, e)))
+}
+
 /// Clustered bakes at each refinement threshold, coarse to fine: one point per whole bake
 /// (links and solve), one curve per form-factor method the clustered bake supports.
 fn clustered_curves(
@@ -366,7 +424,6 @@ fn clustered_curves(
     reference: &[(String, Rgb)],
     reference_name: &str,
 ) -> anyhow::Result<()> {
-    use radiant::radiosity::cluster::{self, ClusterParams};
     anyhow::ensure!(
         !args.refinements.is_empty() && args.refinements.iter().all(|r| *r > 0.0 && r.is_finite()),
         "--refinements must be positive numbers"
@@ -386,49 +443,9 @@ fn clustered_curves(
         let label = format!("clustered / {}", ff.name());
         let mut points = Vec::new();
         for &r in &args.refinements {
-            let mut params = args.solve.params(SolverKind::Jacobi, ff)?;
-            params.links.refinement = r;
-            let cp = ClusterParams {
-                memory_limit: args.memory_limit,
-                ..ClusterParams::default()
+            let Some((t_s, e)) = clustered_point(args, scene, ff, r, reference, &mut csv)? else {
+                break;
             };
-            let pb = progress_bar(1, &format!("{label}, refinement {r}"));
-            let t = Instant::now();
-            let result = cluster::bake(scene, &params, &cp, &|_, done, total| {
-                pb.set_length(total as u64);
-                pb.set_position(done as u64);
-            });
-            let t_s = t.elapsed().as_secs_f64();
-            pb.finish_and_clear();
-            let result = match result {
-                Ok(x) => x,
-                Err(e) => {
-                    println!("{label}, refinement {r}: stopped: {e}");
-                    break;
-                }
-            };
-            let e = metrics::compare_surfaces(&result.surfaces, reference)?;
-            let rep = &result.report;
-            let _ = writeln!(
-                csv,
-                "clustered,{},{r},{t_s:.6},{},{:.6e},{:.6e},{:.6e},{:.6e},{},{}",
-                ff.name(),
-                rep.iterations,
-                e.rel_rms,
-                e.max_rel,
-                rep.residual,
-                e.mean_rel,
-                rep.elements,
-                rep.links
-            );
-            println!(
-                "{label:24} refinement {r:<6} {t_s:>8.2} s  mean {:6.3} %  max {:6.3} %  rms {:6.3} %  {} elements, {} links",
-                e.mean_rel * 100.0,
-                e.max_rel * 100.0,
-                e.rel_rms * 100.0,
-                rep.elements,
-                rep.links
-            );
             points.push((t_s, e.mean_rel));
         }
         if !points.is_empty() {

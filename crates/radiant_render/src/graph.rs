@@ -361,8 +361,29 @@ impl RenderGraph {
 
     /// Culls, orders and plans the allocation of the graph. Pure CPU.
     pub fn compile(self) -> Result<GraphPlan, GraphError> {
-        let n_tex = self.textures.len();
-        let mut writer: Vec<Option<usize>> = vec![None; n_tex];
+        let writer = self.writers()?;
+        let live = self.live_passes(&writer)?;
+        let order = self.order(&writer, &live)?;
+        let (slots, physical) = self.alias(&order);
+        let culled = (0..self.passes.len())
+            .filter(|&p| !live[p])
+            .map(|p| self.passes[p].name)
+            .collect();
+        Ok(GraphPlan {
+            textures: self.textures,
+            passes: self.passes,
+            imports: self.imports,
+            order,
+            culled,
+            slots,
+            physical,
+        })
+    }
+
+    /// The pass that writes each texture; refuses two writers, foreign handles and reads of
+    /// transient textures nobody writes.
+    fn writers(&self) -> Result<Vec<Option<usize>>, GraphError> {
+        let mut writer: Vec<Option<usize>> = vec![None; self.textures.len()];
         for (p, pass) in self.passes.iter().enumerate() {
             for &w in &pass.writes {
                 let slot = writer.get_mut(w.index()).ok_or(GraphError::ForeignHandle)?;
@@ -390,7 +411,12 @@ impl RenderGraph {
                 }
             }
         }
-        // Roots: written imports and exports. Walk back from them.
+        Ok(writer)
+    }
+
+    /// The passes the roots (written imports and exports) depend on, walking back from them.
+    fn live_passes(&self, writer: &[Option<usize>]) -> Result<Vec<bool>, GraphError> {
+        let n_tex = self.textures.len();
         let mut needed = vec![false; n_tex];
         let mut live = vec![false; self.passes.len()];
         let mut stack: Vec<usize> = (0..n_tex)
@@ -416,13 +442,15 @@ impl RenderGraph {
                 stack.extend(self.passes[p].writes.iter().map(|h| h.index()));
             }
         }
-        // Kahn's algorithm over live passes, lowest declaration index first.
-        let mut indegree = vec![0usize; self.passes.len()];
-        let mut users: Vec<Vec<usize>> = vec![Vec::new(); self.passes.len()];
-        for (p, pass) in self.passes.iter().enumerate() {
-            if !live[p] {
-                continue;
-            }
+        Ok(live)
+    }
+
+    /// Kahn's algorithm over the live passes, lowest declaration index first.
+    fn order(&self, writer: &[Option<usize>], live: &[bool]) -> Result<Vec<usize>, GraphError> {
+        let n = self.passes.len();
+        let mut indegree = vec![0usize; n];
+        let mut users: Vec<Vec<usize>> = vec![Vec::new(); n];
+        for (p, pass) in self.passes.iter().enumerate().filter(|&(p, _)| live[p]) {
             for r in &pass.reads {
                 if let Some(w) = writer[r.index()] {
                     indegree[p] += 1;
@@ -430,9 +458,8 @@ impl RenderGraph {
                 }
             }
         }
-        let mut ready: std::collections::BTreeSet<usize> = (0..self.passes.len())
-            .filter(|&p| live[p] && indegree[p] == 0)
-            .collect();
+        let mut ready: std::collections::BTreeSet<usize> =
+            (0..n).filter(|&p| live[p] && indegree[p] == 0).collect();
         let mut order = Vec::new();
         while let Some(p) = ready.pop_first() {
             order.push(p);
@@ -445,12 +472,18 @@ impl RenderGraph {
         }
         let n_live = live.iter().filter(|&&l| l).count();
         if order.len() != n_live {
-            let stuck = (0..self.passes.len())
+            let stuck = (0..n)
                 .find(|&p| live[p] && !order.contains(&p))
                 .map_or("?", |p| self.passes[p].name);
             return Err(GraphError::Cycle { pass: stuck });
         }
-        // Lifetimes in execution steps, then greedy aliasing of identical descriptions.
+        Ok(order)
+    }
+
+    /// Lifetimes in execution steps, then greedy aliasing of identical descriptions: the slot
+    /// of each live transient texture and the physical textures (description, first user).
+    fn alias(&self, order: &[usize]) -> (Vec<Option<usize>>, Vec<(TextureDesc, &'static str)>) {
+        let n_tex = self.textures.len();
         let mut first = vec![usize::MAX; n_tex];
         let mut last = vec![0usize; n_tex];
         for (step, &p) in order.iter().enumerate() {
@@ -466,8 +499,9 @@ impl RenderGraph {
                 last[t] = usize::MAX;
             }
         }
+        // Only live passes are in the order, so a texture with a first step is a live one.
         let mut by_first: Vec<usize> = (0..n_tex)
-            .filter(|&t| needed[t] && self.textures[t].import.is_none() && first[t] != usize::MAX)
+            .filter(|&t| first[t] != usize::MAX && self.textures[t].import.is_none())
             .collect();
         by_first.sort_by_key(|&t| (first[t], t));
         let mut slots: Vec<Option<usize>> = vec![None; n_tex];
@@ -487,19 +521,8 @@ impl RenderGraph {
             physical[s].1 = last[t];
             slots[t] = Some(s);
         }
-        let culled = (0..self.passes.len())
-            .filter(|&p| !live[p])
-            .map(|p| self.passes[p].name)
-            .collect();
-        Ok(GraphPlan {
-            textures: self.textures,
-            passes: self.passes,
-            imports: self.imports,
-            order,
-            culled,
-            slots,
-            physical: physical.into_iter().map(|(d, _, n)| (d, n)).collect(),
-        })
+        let physical = physical.into_iter().map(|(d, _, n)| (d, n)).collect();
+        (slots, physical)
     }
 }
 

@@ -49,10 +49,6 @@ pub struct GBufferPipeline {
 impl GBufferPipeline {
     /// Compiles the pipeline.
     pub fn new(device: &wgpu::Device) -> Self {
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("gbuffer_shader"),
-            source: wgpu::ShaderSource::Wgsl(shader_source().into()),
-        });
         let filterable = wgpu::TextureSampleType::Float { filterable: true };
         let filtering = Slot::Sampler(wgpu::SamplerBindingType::Filtering);
         let stages = wgpu::ShaderStages::VERTEX_FRAGMENT;
@@ -75,79 +71,93 @@ impl GBufferPipeline {
             // Base-colour texture, its sampler, the material's factors.
             &[Slot::Texture(filterable), filtering, Slot::Uniform],
         ));
-        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("gbuffer_pipeline_layout"),
-            bind_group_layouts: &[Some(layout.layout()), Some(material_layout.layout())],
-            immediate_size: 0,
-        });
-        let attributes = wgpu::vertex_attr_array![
-            0 => Float32x3, 1 => Float32x3, 2 => Float32x3, 3 => Float32x3, 4 => Float32x2,
-            5 => Float32x2, 13 => Uint32
-        ];
-        let instance_attributes = wgpu::vertex_attr_array![
-            6 => Float32x4, 7 => Float32x4, 8 => Float32x4,
-            9 => Float32x4, 10 => Float32x4, 11 => Float32x4, 12 => Uint32x4
-        ];
-        let target = |format| {
-            Some(wgpu::ColorTargetState {
-                format,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })
-        };
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("gbuffer_pipeline"),
-            layout: Some(&pl),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("gbuffer_vs"),
-                compilation_options: Default::default(),
-                buffers: &[
-                    Some(wgpu::VertexBufferLayout {
-                        array_stride: std::mem::size_of::<Vertex>() as u64,
-                        step_mode: wgpu::VertexStepMode::Vertex,
-                        attributes: &attributes,
-                    }),
-                    Some(wgpu::VertexBufferLayout {
-                        array_stride: std::mem::size_of::<InstanceData>() as u64,
-                        step_mode: wgpu::VertexStepMode::Instance,
-                        attributes: &instance_attributes,
-                    }),
-                ],
-            },
-            primitive: wgpu::PrimitiveState {
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("gbuffer_fs"),
-                compilation_options: Default::default(),
-                targets: &[
-                    target(ALBEDO_FORMAT),
-                    target(NORMAL_FORMAT),
-                    target(MATERIAL_FORMAT),
-                    target(HDR_FORMAT),
-                    target(HDR_FORMAT),
-                ],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let pipeline = draw_pipeline(device, &layout, &material_layout);
         Self {
             layout,
             material_layout,
             pipeline,
         }
     }
+}
+
+/// The G-buffer's render pipeline: vertex and instance buffers in, five colour targets and
+/// depth out, no culling (back faces are handled in the shader).
+fn draw_pipeline(
+    device: &wgpu::Device,
+    layout: &BindLayout,
+    material_layout: &BindLayout,
+) -> wgpu::RenderPipeline {
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("gbuffer_shader"),
+        source: wgpu::ShaderSource::Wgsl(shader_source().into()),
+    });
+    let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("gbuffer_pipeline_layout"),
+        bind_group_layouts: &[Some(layout.layout()), Some(material_layout.layout())],
+        immediate_size: 0,
+    });
+    let attributes = wgpu::vertex_attr_array![
+        0 => Float32x3, 1 => Float32x3, 2 => Float32x3, 3 => Float32x3, 4 => Float32x2,
+        5 => Float32x2, 13 => Uint32
+    ];
+    let instance_attributes = wgpu::vertex_attr_array![
+        6 => Float32x4, 7 => Float32x4, 8 => Float32x4,
+        9 => Float32x4, 10 => Float32x4, 11 => Float32x4, 12 => Uint32x4
+    ];
+    let target = |format| {
+        Some(wgpu::ColorTargetState {
+            format,
+            blend: None,
+            write_mask: wgpu::ColorWrites::ALL,
+        })
+    };
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("gbuffer_pipeline"),
+        layout: Some(&pl),
+        vertex: wgpu::VertexState {
+            module: &module,
+            entry_point: Some("gbuffer_vs"),
+            compilation_options: Default::default(),
+            buffers: &[
+                Some(wgpu::VertexBufferLayout {
+                    array_stride: std::mem::size_of::<Vertex>() as u64,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &attributes,
+                }),
+                Some(wgpu::VertexBufferLayout {
+                    array_stride: std::mem::size_of::<InstanceData>() as u64,
+                    step_mode: wgpu::VertexStepMode::Instance,
+                    attributes: &instance_attributes,
+                }),
+            ],
+        },
+        primitive: wgpu::PrimitiveState {
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Less),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: &module,
+            entry_point: Some("gbuffer_fs"),
+            compilation_options: Default::default(),
+            targets: &[
+                target(ALBEDO_FORMAT),
+                target(NORMAL_FORMAT),
+                target(MATERIAL_FORMAT),
+                target(HDR_FORMAT),
+                target(HDR_FORMAT),
+            ],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
 }
 
 /// The G-buffer's textures of a `width` × `height` frame.
