@@ -23,7 +23,7 @@ use radiant_visibility::{Bvh, Visibility};
 use rayon::prelude::*;
 
 use crate::mesh::Mesh;
-use crate::{BakeError, FormFactorParams, ParameterError, Rgb, SceneError};
+use crate::{BakeError, FormFactorParams, MaterialError, ParameterError, Rgb, SceneError};
 
 /// The part of the scene a bake lights: dynamic surfaces take no part.
 pub fn static_scene(scene: &Scene) -> std::borrow::Cow<'_, Scene> {
@@ -58,7 +58,7 @@ pub fn validate(scene: &Scene) -> Result<(), BakeError> {
 /// Refuses materials out of range, naming the surface.
 pub fn validate_surfaces(surfaces: &[Surface]) -> Result<(), BakeError> {
     for s in surfaces {
-        let bad = |what: String| BakeError::InvalidMaterial {
+        let bad = |what: MaterialError| BakeError::InvalidMaterial {
             surface: s.name.clone(),
             what,
         };
@@ -66,16 +66,10 @@ pub fn validate_surfaces(surfaces: &[Surface]) -> Result<(), BakeError> {
             .iter()
             .any(|r| !r.is_finite() || !(0.0..=1.0).contains(r))
         {
-            return Err(bad(format!(
-                "reflectance {:?} is outside [0, 1]",
-                s.reflectance
-            )));
+            return Err(bad(MaterialError::Reflectance(s.reflectance)));
         }
         if s.emission.iter().any(|e| !e.is_finite() || *e < 0.0) {
-            return Err(bad(format!(
-                "emission {:?} is negative or not finite",
-                s.emission
-            )));
+            return Err(bad(MaterialError::Emission(s.emission)));
         }
     }
     Ok(())

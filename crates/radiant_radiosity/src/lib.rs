@@ -79,6 +79,31 @@ pub enum SceneError {
     ZeroExtent,
 }
 
+/// What is wrong with a surface's material.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MaterialError {
+    /// Reflectance outside [0, 1] or not finite.
+    #[error("reflectance {0:?} is outside [0, 1]")]
+    Reflectance(Rgb),
+    /// Emission negative or not finite.
+    #[error("emission {0:?} is negative or not finite")]
+    Emission(Rgb),
+    /// The spectral solve has no spectra for the surface's material.
+    #[error("no spectral data for material '{0}'")]
+    NoSpectrum(String),
+    /// A band of the spectral reflectance outside [0, 1].
+    #[error("spectral reflectance {value} outside [0, 1] in band {band}")]
+    SpectralReflectance {
+        /// The band.
+        band: usize,
+        /// Its mean reflectance.
+        value: f64,
+    },
+    /// An emitter whose emission spectrum has no luminance to scale to its RGB emission.
+    #[error("emission spectrum has no luminance")]
+    DarkEmission,
+}
+
 /// A bake parameter no bake can use.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ParameterError {
@@ -135,7 +160,7 @@ pub enum BakeError {
         /// The surface name.
         surface: String,
         /// What is wrong.
-        what: String,
+        what: MaterialError,
     },
     /// A parameter is out of range.
     #[error("invalid parameter: {0}")]

@@ -20,7 +20,7 @@ use crate::metrics::{SurfaceMean, surface_means};
 use crate::solve::{Solve, SolveError};
 use crate::solvers::{SolverKind, SolverParams};
 use crate::system::{Rgb, System};
-use crate::{BakeError, ParameterError};
+use crate::{BakeError, MaterialError, ParameterError};
 
 /// Spectral data of one material.
 #[derive(Clone, Debug, PartialEq)]
@@ -102,13 +102,17 @@ pub fn solve_spectral(
             .get(&s.material)
             .ok_or_else(|| BakeError::InvalidMaterial {
                 surface: s.name.clone(),
-                what: format!("no spectral data for material '{}'", s.material),
+                what: MaterialError::NoSpectrum(s.material.clone()),
             })?;
         let rho = band_means(&m.reflectance, bands);
-        if rho.iter().any(|r| !(0.0..=1.0).contains(r)) {
+        if let Some((band, &value)) = rho
+            .iter()
+            .enumerate()
+            .find(|(_, r)| !(0.0..=1.0).contains(*r))
+        {
             return Err(BakeError::InvalidMaterial {
                 surface: s.name.clone(),
-                what: "spectral reflectance outside [0, 1]".into(),
+                what: MaterialError::SpectralReflectance { band, value },
             });
         }
         let emission = match (&m.emission, s.is_emitter()) {
@@ -119,7 +123,7 @@ pub fn solve_spectral(
                 if y.is_nan() || y <= 0.0 {
                     return Err(BakeError::InvalidMaterial {
                         surface: s.name.clone(),
-                        what: "emission spectrum has no luminance".into(),
+                        what: MaterialError::DarkEmission,
                     });
                 }
                 raw.iter().map(|v| v * target / y).collect()

@@ -320,7 +320,7 @@ fn bad_materials_and_parameters_are_typed_errors() {
 #[test]
 fn bad_input_errors_carry_the_numbers() {
     use radiant_radiosity::metrics::{ReferenceFileError, parse_reference_csv};
-    use radiant_radiosity::{ParameterError, SceneError};
+    use radiant_radiosity::{MaterialError, ParameterError, SceneError};
     let mut s = Scene::default();
     let floor = quad(DVec3::ZERO, DVec3::X, DVec3::Z);
     add_surface(&mut s, "floor", [0.5; 3], [1.0; 3], &floor);
@@ -332,6 +332,15 @@ fn bad_input_errors_carry_the_numbers() {
         }
         other => panic!("expected an out-of-range refinement, got {:?}", other.err()),
     }
+    s.surfaces[0].reflectance = [1.5, 0.5, 0.5];
+    assert!(matches!(
+        Bake::new(&s, &BakeParams::default()),
+        Err(BakeError::InvalidMaterial {
+            what: MaterialError::Reflectance([1.5, 0.5, 0.5]),
+            ..
+        })
+    ));
+    s.surfaces[0].reflectance = [0.5; 3];
     s.triangles[1].surface = 7;
     assert_eq!(
         Bake::new(&s, &BakeParams::default())
