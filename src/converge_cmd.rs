@@ -85,11 +85,20 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
     if gpu {
         gpu_curve(args, &scene, &file_ref, time_limit, &mut csv, &mut curves)?;
     }
+    let title = format!("{source}: mean relative error vs time (reference: {reference_name})");
+    write_outputs(args, &csv, &curves, &title, &reference_name)
+}
+
+/// Writes `convergence.csv` and the plot of `curves`, and says so.
+fn write_outputs(
+    args: &ConvergeArgs,
+    csv: &str,
+    curves: &[Curve],
+    title: &str,
+    reference_name: &str,
+) -> anyhow::Result<()> {
     write_atomic(&args.out.join("convergence.csv"), csv.as_bytes())?;
-    let png = plot_convergence(
-        &curves,
-        &format!("{source}: mean relative error vs time (reference: {reference_name})"),
-    )?;
+    let png = plot_convergence(curves, title)?;
     write_atomic(&args.out.join("convergence.png"), &png)?;
     println!("reference: {reference_name}");
     println!(
@@ -452,16 +461,6 @@ fn clustered_curves(
             curves.push(Curve { label, points });
         }
     }
-    write_atomic(&args.out.join("convergence.csv"), csv.as_bytes())?;
-    let png = plot_convergence(
-        &curves,
-        &format!("{source}: mean relative error vs bake time (reference: {reference_name})"),
-    )?;
-    write_atomic(&args.out.join("convergence.png"), &png)?;
-    println!("reference: {reference_name}");
-    println!(
-        "wrote {}/convergence.csv and convergence.png",
-        args.out.display()
-    );
-    Ok(())
+    let title = format!("{source}: mean relative error vs bake time (reference: {reference_name})");
+    write_outputs(args, &csv, &curves, &title, reference_name)
 }
