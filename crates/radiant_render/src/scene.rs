@@ -780,125 +780,8 @@ impl GpuScene {
         cache: &mut TextureCache,
     ) -> Result<Self, RenderError> {
         let dev = &gpu.device;
-        if scene.vertices.is_empty() || scene.indices.is_empty() {
-            return Err(RenderError::EmptyScene);
-        }
-        for v in &scene.vertices {
-            let all = v
-                .position
-                .iter()
-                .chain(&v.normal)
-                .chain(&v.albedo)
-                .chain(&v.emissive)
-                .chain(&v.lightmap_uv)
-                .chain(&v.uv);
-            if all.clone().any(|x| !x.is_finite()) {
-                return Err(RenderError::NonFinite("vertex data"));
-            }
-        }
-        if let Some(&i) = scene
-            .indices
-            .iter()
-            .find(|&&i| i as usize >= scene.vertices.len())
-        {
-            return Err(RenderError::IndexOutOfRange {
-                index: i,
-                vertices: scene.vertices.len(),
-            });
-        }
-        let whole = [DrawRange::new(0, 0, scene.indices.len() as u32)];
-        let draws = if scene.draws.is_empty() {
-            &whole[..]
-        } else {
-            &scene.draws[..]
-        };
-        let instance_count = scene.instances.len().max(1) as u64;
-        for d in draws {
-            if u64::from(d.first) + u64::from(d.count) > scene.indices.len() as u64 {
-                return Err(SceneError::DrawRange {
-                    start: d.first.into(),
-                    end: u64::from(d.first) + u64::from(d.count),
-                    len: scene.indices.len(),
-                    of: "indices",
-                }
-                .into());
-            }
-            if u64::from(d.first_instance) + u64::from(d.instance_count) > instance_count {
-                return Err(SceneError::DrawRange {
-                    start: d.first_instance.into(),
-                    end: u64::from(d.first_instance) + u64::from(d.instance_count),
-                    len: instance_count as usize,
-                    of: "instances",
-                }
-                .into());
-            }
-        }
-        let mut instance_data: Vec<InstanceData> = if scene.instances.is_empty() {
-            vec![InstanceData::IDENTITY]
-        } else {
-            scene.instances.clone()
-        };
-        let finite = |i: &InstanceData| {
-            i.model
-                .iter()
-                .chain(&i.normal)
-                .flatten()
-                .all(|x| x.is_finite())
-        };
-        if !instance_data.iter().all(finite) {
-            return Err(RenderError::NonFinite("instance data"));
-        }
-        for t in &scene.textures {
-            if t.pixels.len() as u64 != u64::from(t.width) * u64::from(t.height) * 4
-                || t.width == 0
-                || t.height == 0
-            {
-                return Err(SceneError::TextureBytes {
-                    texture: t.name.clone(),
-                    bytes: t.pixels.len(),
-                    width: t.width,
-                    height: t.height,
-                }
-                .into());
-            }
-        }
-        // Each draw's vertices in draw order: draws become plain vertex ranges.
-        let mut drawn: Vec<Vertex> = Vec::new();
-        let mut resolved = Vec::with_capacity(draws.len());
-        for d in draws {
-            let first = drawn.len() as u32;
-            drawn.extend(
-                scene.indices[d.first as usize..(d.first + d.count) as usize]
-                    .iter()
-                    .map(|&i| scene.vertices[i as usize]),
-            );
-            resolved.push(DrawRange { first, ..*d });
-            // Copies with their own light-map coordinates read them relative to this draw.
-            let range = d.first_instance as usize..(d.first_instance + d.instance_count) as usize;
-            for inst in &mut instance_data[range] {
-                if inst.lightmap[2] != 0 {
-                    inst.lightmap[1] = first;
-                    if u64::from(inst.lightmap[0]) + u64::from(d.count)
-                        > scene.instance_uvs.len() as u64
-                    {
-                        return Err(SceneError::DrawRange {
-                            start: inst.lightmap[0].into(),
-                            end: u64::from(inst.lightmap[0]) + u64::from(d.count),
-                            len: scene.instance_uvs.len(),
-                            of: "copies' light-map coordinates",
-                        }
-                        .into());
-                    }
-                }
-            }
-        }
-        if !scene
-            .instance_uvs
-            .iter()
-            .all(|u| u.uv.iter().all(|x| x.is_finite()))
-        {
-            return Err(RenderError::NonFinite("instance light-map coordinates"));
-        }
+        let (draws, mut instance_data) = validate(scene)?;
+        let (drawn, resolved) = flatten_draws(scene, &draws, &mut instance_data)?;
         let materials = cache.upload(
             dev,
             &gpu.queue,
@@ -930,108 +813,13 @@ impl GpuScene {
             }),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        let mut lights: Vec<GpuLight> = Vec::with_capacity(scene.lights.len().max(1));
-        for l in &scene.lights {
-            if l.range.is_nan() {
-                return Err(RenderError::NonFinite("light"));
-            }
-            if l.range <= 0.0 {
-                // A non-positive range reaches nothing, as in the bake.
-                continue;
-            }
-            let p = (l.position - scene.origin).as_vec3();
-            let c = l.color * l.intensity;
-            if !(p.is_finite() && c.is_finite() && l.direction.is_finite()) || l.intensity < 0.0 {
-                return Err(RenderError::NonFinite("light"));
-            }
-            let (kind, spot) = match l.kind {
-                LightKind::Directional => (0.0, [0.0; 4]),
-                LightKind::Point => (1.0, [0.0; 4]),
-                LightKind::Spot {
-                    inner_angle,
-                    outer_angle,
-                } => {
-                    let (ci, co) = (inner_angle.cos(), outer_angle.cos());
-                    (2.0, [co, 1.0 / (ci - co).max(1e-4), 0.0, 0.0])
-                }
-            };
-            lights.push(GpuLight {
-                position_range: [
-                    p.x,
-                    p.y,
-                    p.z,
-                    if l.range.is_finite() { l.range } else { 0.0 },
-                ],
-                direction_kind: {
-                    let d = l.direction.normalize_or(Vec3::NEG_Y);
-                    [d.x, d.y, d.z, kind]
-                },
-                color: [c.x, c.y, c.z, 0.0],
-                spot,
-            });
-        }
-        let light_count = lights.len() as u32;
-        if lights.is_empty() {
-            lights.push(GpuLight::zeroed());
-        }
+        let (lights, light_count) = gpu_lights(scene)?;
         let lights = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("scene_lights"),
             contents: bytemuck::cast_slice(&lights),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        let (lw, lh, layers, data): (u32, u32, u32, Vec<u16>) = match &scene.lightmap {
-            Some(lm)
-                if lm.width > 0
-                    && lm.height > 0
-                    && lm.pages > 0
-                    && lm.texels.len() as u64
-                        == u64::from(lm.width) * u64::from(lm.height) * u64::from(lm.pages) =>
-            {
-                if lm.texels.iter().flatten().any(|x| !x.is_finite()) {
-                    return Err(RenderError::NonFinite("light map"));
-                }
-                let limits = gpu.device.limits();
-                let max = limits.max_texture_dimension_2d;
-                if lm.width > max || lm.height > max {
-                    return Err(RenderError::InvalidSize {
-                        width: lm.width,
-                        height: lm.height,
-                        max,
-                    });
-                }
-                if lm.pages > limits.max_texture_array_layers {
-                    return Err(SceneError::LightMapPages {
-                        pages: lm.pages,
-                        max: limits.max_texture_array_layers,
-                    }
-                    .into());
-                }
-                (
-                    lm.width,
-                    lm.height,
-                    lm.pages,
-                    lm.texels
-                        .iter()
-                        .flat_map(|t| [t[0], t[1], t[2], 1.0].map(f32_to_f16))
-                        .collect(),
-                )
-            }
-            Some(_) => return Err(RenderError::NonFinite("light map size")),
-            None => (1, 1, 1, vec![0; 4]),
-        };
-        let page = scene
-            .vertices
-            .iter()
-            .map(|v| v.lightmap_page)
-            .chain(scene.instance_uvs.iter().map(|u| u.page))
-            .find(|&p| p >= layers);
-        if let Some(p) = page {
-            return Err(SceneError::LightMapPage {
-                page: p,
-                pages: layers,
-            }
-            .into());
-        }
+        let (lw, lh, layers, data) = lightmap_texels(gpu, scene)?;
         let lightmap = crate::util::sampled_texture_array(
             dev,
             &gpu.queue,
@@ -1095,6 +883,254 @@ impl GpuScene {
         };
         queue.write_buffer(&self.camera, 0, bytemuck::bytes_of(&u));
     }
+}
+
+/// Refuses what would put NaN or out-of-range reads on the GPU: non-finite vertices and
+/// instances, indices past the vertices, draws past the indices or instances, textures whose
+/// bytes do not fill them. Returns the draws (one over everything when the scene has none) and
+/// the instances (the identity when it has none).
+fn validate(scene: &RenderScene) -> Result<(Vec<DrawRange>, Vec<InstanceData>), RenderError> {
+    if scene.vertices.is_empty() || scene.indices.is_empty() {
+        return Err(RenderError::EmptyScene);
+    }
+    for v in &scene.vertices {
+        let all = v
+            .position
+            .iter()
+            .chain(&v.normal)
+            .chain(&v.albedo)
+            .chain(&v.emissive)
+            .chain(&v.lightmap_uv)
+            .chain(&v.uv);
+        if all.clone().any(|x| !x.is_finite()) {
+            return Err(RenderError::NonFinite("vertex data"));
+        }
+    }
+    if let Some(&i) = scene
+        .indices
+        .iter()
+        .find(|&&i| i as usize >= scene.vertices.len())
+    {
+        return Err(RenderError::IndexOutOfRange {
+            index: i,
+            vertices: scene.vertices.len(),
+        });
+    }
+    let whole = [DrawRange::new(0, 0, scene.indices.len() as u32)];
+    let draws = if scene.draws.is_empty() {
+        whole.to_vec()
+    } else {
+        scene.draws.clone()
+    };
+    let instance_count = scene.instances.len().max(1) as u64;
+    for d in &draws {
+        if u64::from(d.first) + u64::from(d.count) > scene.indices.len() as u64 {
+            return Err(SceneError::DrawRange {
+                start: d.first.into(),
+                end: u64::from(d.first) + u64::from(d.count),
+                len: scene.indices.len(),
+                of: "indices",
+            }
+            .into());
+        }
+        if u64::from(d.first_instance) + u64::from(d.instance_count) > instance_count {
+            return Err(SceneError::DrawRange {
+                start: d.first_instance.into(),
+                end: u64::from(d.first_instance) + u64::from(d.instance_count),
+                len: instance_count as usize,
+                of: "instances",
+            }
+            .into());
+        }
+    }
+    let instance_data: Vec<InstanceData> = if scene.instances.is_empty() {
+        vec![InstanceData::IDENTITY]
+    } else {
+        scene.instances.clone()
+    };
+    let finite = |i: &InstanceData| {
+        i.model
+            .iter()
+            .chain(&i.normal)
+            .flatten()
+            .all(|x| x.is_finite())
+    };
+    if !instance_data.iter().all(finite) {
+        return Err(RenderError::NonFinite("instance data"));
+    }
+    for t in &scene.textures {
+        if t.pixels.len() as u64 != u64::from(t.width) * u64::from(t.height) * 4
+            || t.width == 0
+            || t.height == 0
+        {
+            return Err(SceneError::TextureBytes {
+                texture: t.name.clone(),
+                bytes: t.pixels.len(),
+                width: t.width,
+                height: t.height,
+            }
+            .into());
+        }
+    }
+    Ok((draws, instance_data))
+}
+
+/// Each draw's vertices in draw order, so draws become plain vertex ranges; copies with their
+/// own light-map coordinates read them relative to their draw.
+fn flatten_draws(
+    scene: &RenderScene,
+    draws: &[DrawRange],
+    instance_data: &mut [InstanceData],
+) -> Result<(Vec<Vertex>, Vec<DrawRange>), RenderError> {
+    let mut drawn: Vec<Vertex> = Vec::new();
+    let mut resolved = Vec::with_capacity(draws.len());
+    for d in draws {
+        let first = drawn.len() as u32;
+        drawn.extend(
+            scene.indices[d.first as usize..(d.first + d.count) as usize]
+                .iter()
+                .map(|&i| scene.vertices[i as usize]),
+        );
+        resolved.push(DrawRange { first, ..*d });
+        // Copies with their own light-map coordinates read them relative to this draw.
+        let range = d.first_instance as usize..(d.first_instance + d.instance_count) as usize;
+        for inst in &mut instance_data[range] {
+            if inst.lightmap[2] != 0 {
+                inst.lightmap[1] = first;
+                if u64::from(inst.lightmap[0]) + u64::from(d.count)
+                    > scene.instance_uvs.len() as u64
+                {
+                    return Err(SceneError::DrawRange {
+                        start: inst.lightmap[0].into(),
+                        end: u64::from(inst.lightmap[0]) + u64::from(d.count),
+                        len: scene.instance_uvs.len(),
+                        of: "copies' light-map coordinates",
+                    }
+                    .into());
+                }
+            }
+        }
+    }
+    if !scene
+        .instance_uvs
+        .iter()
+        .all(|u| u.uv.iter().all(|x| x.is_finite()))
+    {
+        return Err(RenderError::NonFinite("instance light-map coordinates"));
+    }
+    Ok((drawn, resolved))
+}
+
+/// The lights in the GPU's layout, relative to the scene's origin, and how many; a light with
+/// a non-positive range reaches nothing and is left out.
+fn gpu_lights(scene: &RenderScene) -> Result<(Vec<GpuLight>, u32), RenderError> {
+    let mut lights: Vec<GpuLight> = Vec::with_capacity(scene.lights.len().max(1));
+    for l in &scene.lights {
+        if l.range.is_nan() {
+            return Err(RenderError::NonFinite("light"));
+        }
+        if l.range <= 0.0 {
+            // A non-positive range reaches nothing, as in the bake.
+            continue;
+        }
+        let p = (l.position - scene.origin).as_vec3();
+        let c = l.color * l.intensity;
+        if !(p.is_finite() && c.is_finite() && l.direction.is_finite()) || l.intensity < 0.0 {
+            return Err(RenderError::NonFinite("light"));
+        }
+        let (kind, spot) = match l.kind {
+            LightKind::Directional => (0.0, [0.0; 4]),
+            LightKind::Point => (1.0, [0.0; 4]),
+            LightKind::Spot {
+                inner_angle,
+                outer_angle,
+            } => {
+                let (ci, co) = (inner_angle.cos(), outer_angle.cos());
+                (2.0, [co, 1.0 / (ci - co).max(1e-4), 0.0, 0.0])
+            }
+        };
+        lights.push(GpuLight {
+            position_range: [
+                p.x,
+                p.y,
+                p.z,
+                if l.range.is_finite() { l.range } else { 0.0 },
+            ],
+            direction_kind: {
+                let d = l.direction.normalize_or(Vec3::NEG_Y);
+                [d.x, d.y, d.z, kind]
+            },
+            color: [c.x, c.y, c.z, 0.0],
+            spot,
+        });
+    }
+    let light_count = lights.len() as u32;
+    if lights.is_empty() {
+        lights.push(GpuLight::zeroed());
+    }
+    Ok((lights, light_count))
+}
+
+/// The light map's size, pages and half-float texels (a black 1×1 page without one), checked
+/// against the adapter's limits and the pages the vertices name.
+fn lightmap_texels(
+    gpu: &crate::GpuContext,
+    scene: &RenderScene,
+) -> Result<(u32, u32, u32, Vec<u16>), RenderError> {
+    let (lw, lh, layers, data): (u32, u32, u32, Vec<u16>) = match &scene.lightmap {
+        Some(lm)
+            if lm.width > 0
+                && lm.height > 0
+                && lm.pages > 0
+                && lm.texels.len() as u64
+                    == u64::from(lm.width) * u64::from(lm.height) * u64::from(lm.pages) =>
+        {
+            if lm.texels.iter().flatten().any(|x| !x.is_finite()) {
+                return Err(RenderError::NonFinite("light map"));
+            }
+            let limits = gpu.device.limits();
+            let max = limits.max_texture_dimension_2d;
+            if lm.width > max || lm.height > max {
+                return Err(RenderError::InvalidSize {
+                    width: lm.width,
+                    height: lm.height,
+                    max,
+                });
+            }
+            if lm.pages > limits.max_texture_array_layers {
+                return Err(SceneError::LightMapPages {
+                    pages: lm.pages,
+                    max: limits.max_texture_array_layers,
+                }
+                .into());
+            }
+            (
+                lm.width,
+                lm.height,
+                lm.pages,
+                lm.texels
+                    .iter()
+                    .flat_map(|t| [t[0], t[1], t[2], 1.0].map(f32_to_f16))
+                    .collect(),
+            )
+        }
+        Some(_) => return Err(RenderError::NonFinite("light map size")),
+        None => (1, 1, 1, vec![0; 4]),
+    };
+    let page = scene
+        .vertices
+        .iter()
+        .map(|v| v.lightmap_page)
+        .chain(scene.instance_uvs.iter().map(|u| u.page))
+        .find(|&p| p >= layers);
+    if let Some(p) = page {
+        return Err(SceneError::LightMapPage {
+            page: p,
+            pages: layers,
+        }
+        .into());
+    }
+    Ok((lw, lh, layers, data))
 }
 
 /// The sky's uniform and image.
