@@ -343,34 +343,7 @@ impl RenderScene {
             of_surface[t.surface as usize].push(i as u32);
         }
         let (w, h, pages) = (atlas.width, atlas.height, atlas.pages);
-        let mut vertices = Vec::with_capacity(scene.triangles.len() * 3);
-        for (i, t) in scene.triangles.iter().enumerate() {
-            let s = &scene.surfaces[t.surface as usize];
-            let face = t.cross().normalize_or_zero().as_vec3();
-            let albedo = factors[t.surface as usize];
-            let uvs = atlas.uv[i].map(|c| c.to_array());
-            for (k, p) in t.vertices.iter().enumerate() {
-                let n = t.normals[k];
-                let normal = if n.is_finite() && n.length_squared() > 0.5 {
-                    n
-                } else {
-                    face
-                };
-                let uv = s.base_color_texture.map_or(Vec2::ZERO, |tex| {
-                    let uv = tex.uv([t.uv[0][k], t.uv[1][k]]);
-                    if uv.is_finite() { uv } else { Vec2::ZERO }
-                });
-                vertices.push(Vertex {
-                    position: (*p - origin).as_vec3().to_array(),
-                    normal: normal.to_array(),
-                    albedo,
-                    emissive: s.emission.map(|x| x as f32),
-                    lightmap_uv: uvs[k],
-                    uv: uv.to_array(),
-                    lightmap_page: atlas.page[i],
-                });
-            }
-        }
+        let vertices = scene_vertices(scene, &atlas, origin, &factors);
         // Surfaces that copy another are drawn as its instances; the rest are grouped by
         // material (vertices stay in triangle order, which the light-map fill relies on).
         let copies = if instancing {
@@ -462,47 +435,8 @@ impl RenderScene {
                 pixels: img.pixels.clone(),
             })
             .collect();
-        let diag = (hi - lo).length().max(1e-6);
-        let camera = scene.camera.map_or(
-            CameraView {
-                position: origin + DVec3::new(0.0, 0.0, diag * 1.5),
-                forward: Vec3::NEG_Z,
-                up: Vec3::Y,
-                yfov: 0.7,
-                near: (diag * 1e-3) as f32,
-                far: (diag * 4.0).max(1.0) as f32,
-            },
-            |c| CameraView {
-                position: c.position,
-                forward: c.forward.as_vec3(),
-                up: c.up.as_vec3(),
-                yfov: c.yfov as f32,
-                near: 0.01,
-                far: ((hi - lo).length() * 4.0).max(1.0) as f32,
-            },
-        );
-        let lights = scene
-            .lights
-            .iter()
-            .map(|l| Light {
-                kind: match l.kind {
-                    radiant_scene::LightKind::Point => LightKind::Point,
-                    radiant_scene::LightKind::Directional => LightKind::Directional,
-                    radiant_scene::LightKind::Spot {
-                        inner_cone_angle,
-                        outer_cone_angle,
-                    } => LightKind::Spot {
-                        inner_angle: inner_cone_angle as f32,
-                        outer_angle: outer_cone_angle as f32,
-                    },
-                },
-                position: l.position,
-                direction: l.direction.as_vec3(),
-                color: Vec3::from_array(l.color.map(|c| c as f32)),
-                intensity: l.intensity as f32,
-                range: l.range.map_or(f32::INFINITY, |r| r as f32),
-            })
-            .collect();
+        let camera = scene_camera(scene, origin, (lo, hi));
+        let lights = scene_lights(scene);
         Ok(Self {
             origin,
             indices,
@@ -599,6 +533,100 @@ impl RenderScene {
             h.to_array()
         });
     }
+}
+
+/// Three vertices per triangle, in triangle order (the light-map fill relies on it): relative
+/// to `origin`, the shading normal where it is usable (else the face's), the surface's albedo
+/// and emission, the atlas's light-map coordinates, the base-colour texture's coordinates.
+fn scene_vertices(
+    scene: &radiant_scene::Scene,
+    atlas: &radiant_scene::atlas::Atlas,
+    origin: DVec3,
+    factors: &[[f32; 3]],
+) -> Vec<Vertex> {
+    let mut vertices = Vec::with_capacity(scene.triangles.len() * 3);
+    for (i, t) in scene.triangles.iter().enumerate() {
+        let s = &scene.surfaces[t.surface as usize];
+        let face = t.cross().normalize_or_zero().as_vec3();
+        let albedo = factors[t.surface as usize];
+        let uvs = atlas.uv[i].map(|c| c.to_array());
+        for (k, p) in t.vertices.iter().enumerate() {
+            let n = t.normals[k];
+            let normal = if n.is_finite() && n.length_squared() > 0.5 {
+                n
+            } else {
+                face
+            };
+            let uv = s.base_color_texture.map_or(Vec2::ZERO, |tex| {
+                let uv = tex.uv([t.uv[0][k], t.uv[1][k]]);
+                if uv.is_finite() { uv } else { Vec2::ZERO }
+            });
+            vertices.push(Vertex {
+                position: (*p - origin).as_vec3().to_array(),
+                normal: normal.to_array(),
+                albedo,
+                emissive: s.emission.map(|x| x as f32),
+                lightmap_uv: uvs[k],
+                uv: uv.to_array(),
+                lightmap_page: atlas.page[i],
+            });
+        }
+    }
+    vertices
+}
+
+/// The scene's camera, or one looking down −Z at the whole scene; far enough for the bounds
+/// `lo`..`hi`.
+fn scene_camera(
+    scene: &radiant_scene::Scene,
+    origin: DVec3,
+    (lo, hi): (DVec3, DVec3),
+) -> CameraView {
+    let diag = (hi - lo).length().max(1e-6);
+    scene.camera.map_or(
+        CameraView {
+            position: origin + DVec3::new(0.0, 0.0, diag * 1.5),
+            forward: Vec3::NEG_Z,
+            up: Vec3::Y,
+            yfov: 0.7,
+            near: (diag * 1e-3) as f32,
+            far: (diag * 4.0).max(1.0) as f32,
+        },
+        |c| CameraView {
+            position: c.position,
+            forward: c.forward.as_vec3(),
+            up: c.up.as_vec3(),
+            yfov: c.yfov as f32,
+            near: 0.01,
+            far: ((hi - lo).length() * 4.0).max(1.0) as f32,
+        },
+    )
+}
+
+/// The scene's punctual lights in the renderer's types.
+fn scene_lights(scene: &radiant_scene::Scene) -> Vec<Light> {
+    scene
+        .lights
+        .iter()
+        .map(|l| Light {
+            kind: match l.kind {
+                radiant_scene::LightKind::Point => LightKind::Point,
+                radiant_scene::LightKind::Directional => LightKind::Directional,
+                radiant_scene::LightKind::Spot {
+                    inner_cone_angle,
+                    outer_cone_angle,
+                } => LightKind::Spot {
+                    inner_angle: inner_cone_angle as f32,
+                    outer_angle: outer_cone_angle as f32,
+                },
+            },
+            position: l.position,
+            direction: l.direction.as_vec3(),
+            color: Vec3::from_array(l.color.map(|c| c as f32)),
+            intensity: l.intensity as f32,
+            range: l.range.map_or(f32::INFINITY, |r| r as f32),
+        })
+        .collect()
 }
 
 /// The unit face normal of three vertices (counter-clockwise front).
