@@ -304,7 +304,7 @@ impl Refiner<'_> {
     fn sample(&self, id: u32, u: f64, rng: &mut Rng) -> (DVec3, DVec3) {
         let node = match self.tree.cluster(id) {
             Some(c) => {
-                let t = self.tree.pick(c, u);
+                let t = self.tree.pick(self.mesh, c, u);
                 &self.mesh.nodes[self.mesh.roots[t as usize] as usize]
             }
             None => &self.mesh.nodes[id as usize],

@@ -5,6 +5,11 @@
 //! cluster tree is built by median splits along the longest axis of the triangles' centroids,
 //! in preorder, so a parent's id is always below its children's, among clusters as among mesh
 //! nodes: one forward pass over the ids pushes down, one backward pass pulls up.
+//!
+//! A cluster depends only on the triangles it holds: its split, its order of triangles, its
+//! box, area and harmonics are computed from its children, never from its place in the whole.
+//! So after a geometry edit, a cluster of the same triangles is the same cluster bit for bit,
+//! and what was refined for it can be kept ([`super::refine`]).
 
 use glam::DVec3;
 
@@ -36,9 +41,6 @@ pub struct Tree {
     pub clusters: Vec<Cluster>,
     /// Input triangles in cluster order: each cluster covers a contiguous range.
     pub order: Vec<u32>,
-    /// Prefix sums of the triangles' areas in `order` (length `order.len() + 1`), for sampling
-    /// points on a cluster by area.
-    pub cdf: Vec<f64>,
     /// Parent of every node (`u32::MAX` for the root).
     pub parent: Vec<u32>,
     /// Centre of every node's bounding sphere.
@@ -67,7 +69,6 @@ impl Tree {
             mesh_nodes: m,
             clusters: Vec::with_capacity(k.saturating_sub(1)),
             order: Vec::new(),
-            cdf: Vec::new(),
             parent: Vec::new(),
             center: Vec::new(),
             radius: Vec::new(),
@@ -78,14 +79,6 @@ impl Tree {
             tree.split(mesh, &centroids, &mut order, 0);
         }
         tree.order = order;
-        let mut cdf = Vec::with_capacity(k + 1);
-        cdf.push(0.0);
-        let mut acc = 0.0;
-        for &t in &tree.order {
-            acc += mesh.nodes[mesh.roots[t as usize] as usize].area;
-            cdf.push(acc);
-        }
-        tree.cdf = cdf;
         let total = m as usize + tree.clusters.len();
         tree.parent = vec![u32::MAX; total];
         tree.center = Vec::with_capacity(total);
@@ -144,18 +137,10 @@ impl Tree {
             first,
             end: first + items.len() as u32,
         });
-        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-        let (mut clo, mut chi) = (lo, hi);
-        let mut area = 0.0;
+        let (mut clo, mut chi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
         for &t in items.iter() {
-            let n = &mesh.nodes[mesh.roots[t as usize] as usize];
-            for v in n.v {
-                lo = lo.min(v);
-                hi = hi.max(v);
-            }
             clo = clo.min(centroids[t as usize]);
             chi = chi.max(centroids[t as usize]);
-            area += n.area;
         }
         let ext = chi - clo;
         let axis = if ext.x >= ext.y && ext.x >= ext.z {
@@ -175,12 +160,30 @@ impl Tree {
         let (left, right) = items.split_at_mut(mid);
         let a = self.split(mesh, centroids, left, first);
         let b = self.split(mesh, centroids, right, first + mid as u32);
+        // From the children, so that the cluster's numbers depend on its triangles only.
+        let ((alo, ahi, aa), (blo, bhi, ba)) = (self.bounds(mesh, a), self.bounds(mesh, b));
         let c = &mut self.clusters[id];
-        c.lo = lo;
-        c.hi = hi;
-        c.area = area;
+        c.lo = alo.min(blo);
+        c.hi = ahi.max(bhi);
+        c.area = aa + ba;
         c.children = [a, b];
         self.mesh_nodes + id as u32
+    }
+
+    /// Box and area of a node while the tree is built (clusters below it are done).
+    fn bounds(&self, mesh: &Mesh, id: u32) -> (DVec3, DVec3, f64) {
+        match id.checked_sub(self.mesh_nodes) {
+            Some(c) => {
+                let c = &self.clusters[c as usize];
+                (c.lo, c.hi, c.area)
+            }
+            None => {
+                let n = &mesh.nodes[id as usize];
+                let lo = n.v[0].min(n.v[1]).min(n.v[2]);
+                let hi = n.v[0].max(n.v[1]).max(n.v[2]);
+                (lo, hi, n.area)
+            }
+        }
     }
 
     /// The root node: the first cluster, or the only triangle.
@@ -209,14 +212,25 @@ impl Tree {
         self.parent.is_empty()
     }
 
-    /// The input triangle (index into [`Tree::order`]) whose area interval holds `u` in
-    /// `[0, 1)` of cluster `c`'s area.
+    /// The input triangle whose share of cluster `c`'s area holds `u` in `[0, 1)`: found by
+    /// going down the children by their areas, so it depends on the cluster only.
     #[inline]
-    pub fn pick(&self, c: &Cluster, u: f64) -> u32 {
-        let (a, b) = (self.cdf[c.first as usize], self.cdf[c.end as usize]);
-        let x = a + u * (b - a);
-        let lo = c.first as usize;
-        let k = self.cdf[lo + 1..=c.end as usize].partition_point(|&v| v <= x);
-        self.order[(lo + k).min(c.end as usize - 1)]
+    pub fn pick(&self, mesh: &Mesh, c: &Cluster, u: f64) -> u32 {
+        let (mut c, mut u) = (c, u);
+        loop {
+            let [a, b] = c.children;
+            let (wa, wb) = (self.area[a as usize], self.area[b as usize]);
+            let x = u * (wa + wb);
+            let (next, v) = if x < wa || wb <= 0.0 {
+                (a, if wa > 0.0 { x / wa } else { 0.0 })
+            } else {
+                (b, (x - wa) / wb)
+            };
+            u = v.clamp(0.0, 1.0);
+            match self.cluster(next) {
+                Some(cl) => c = cl,
+                None => return mesh.nodes[next as usize].root,
+            }
+        }
     }
 }
