@@ -67,6 +67,8 @@ pub(crate) fn bake_clustered(
     let cp = ClusterParams {
         memory_limit: h.memory_limit,
         samples: h.link_samples,
+        // A one-shot bake: no geometry edits follow, so the refinement's record is not kept.
+        edits: false,
         ..ClusterParams::default()
     };
     let pb = progress_bar(1, "links (clustered)");

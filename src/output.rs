@@ -158,6 +158,7 @@ pub fn report_json(
             "clusters": c.clusters,
             "cluster_receiver_links": c.cluster_receiver_links,
             "cluster_source_links": c.cluster_source_links,
+            "form_factors_computed": c.form_factors,
             "links_per_element": r.links as f64 / r.elements.max(1) as f64,
             "refinement_asked": c.refinement_asked,
             "refinement_used": c.refinement_used,

@@ -16,7 +16,9 @@
 //!   the static scene's bounding box bakes again;
 //! - a level (`radiant_radiosity::cluster::suits`) bakes clustered
 //!   (`radiant_radiosity::cluster::ClusterBake`): materials, lights and the sky keep its
-//!   links; a geometry edit bakes it again (and stops a build in progress).
+//!   links, and a geometry edit refines only what it touches (`ClusterBake::edit_geometry`);
+//!   one that arrives while the level's links are being built stops the build, which starts
+//!   again on the edited scene.
 //!
 //! A bake that converged, or was paused, returns to the world, ready for the next edit or for
 //! resuming; an edit that reaches a worker as it stops is applied on the next start. The

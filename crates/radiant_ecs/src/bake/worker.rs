@@ -70,8 +70,8 @@ pub(super) enum Outcome {
         paused: bool,
     },
     Cancelled,
-    /// The change cannot be absorbed (a geometry edit of a level, the surfaces renumbered):
-    /// bake the scene again.
+    /// The change cannot be absorbed (the scene's bounds changed, the surfaces renumbered, a
+    /// level's geometry edited while its links were being built): bake the scene again.
     NeedsRebuild,
     Failed(Arc<BakeError>),
 }
@@ -91,9 +91,9 @@ pub(super) struct Edit {
     pub geometry: Option<Arc<Scene>>,
 }
 
-/// The bake a worker drives: per-triangle, whose links follow geometry edits, or clustered
-/// for a level (see `radiant_radiosity::cluster::suits`), whose links follow material and
-/// light edits and which bakes again after a geometry edit.
+/// The bake a worker drives: per-triangle, or clustered for a level (see
+/// `radiant_radiosity::cluster::suits`); the links of both follow material, light and geometry
+/// edits.
 pub(super) enum Engine {
     Triangles(Bake),
     Clustered(ClusterBake),
@@ -275,11 +275,16 @@ impl Engine {
         // A geometry edit brings the scene's materials and lights along (and matches
         // surfaces by name, so they must not be renamed under it first).
         if let Some(scene) = &edit.geometry {
-            let Engine::Triangles(b) = self else {
-                return Err(BakeError::NeedsRebuild);
+            return match self {
+                Engine::Triangles(b) => {
+                    let stats = b.edit_geometry(scene)?;
+                    Ok(Some((stats.recomputed, b.system.links.len())))
+                }
+                Engine::Clustered(b) => {
+                    let e = b.edit_geometry(scene, &|_, _, _| {}, None)?;
+                    Ok(Some((e.computed as usize, e.links)))
+                }
             };
-            let stats = b.edit_geometry(scene)?;
-            return Ok(Some((stats.recomputed, b.system.links.len())));
         }
         if edit.surfaces.len() != self.surfaces().len() {
             return Err(BakeError::NeedsRebuild);

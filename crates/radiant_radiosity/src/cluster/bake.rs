@@ -6,14 +6,18 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use radiant_scene::{Light, Scene, Sky, Surface};
-use radiant_visibility::Bvh;
+use radiant_visibility::Visibility;
 
+use super::edit::{Before, New, Old};
+use super::record::Record;
+use super::refine::RefineStats;
 use super::solve::{HierSystem, LINK_BYTES};
 use super::tree::Tree;
 use super::{
     Budget, COARSEN_STEPS, ClusterParams, ClusterReport, Phase, Sweep, Watch, check, refine,
 };
 use crate::checkpoint::CheckpointError;
+use crate::hierarchy::RootMatch;
 use crate::input::{self, Lighting};
 use crate::mesh::Mesh;
 use crate::metrics::surface_means;
@@ -40,6 +44,12 @@ pub struct ClusterBake {
     fingerprint: u64,
     /// The threshold the links were built with.
     refinement_used: f64,
+    /// The estimates the links were refined with.
+    oracle: Oracle,
+    /// The refinement, kept for geometry edits ([`ClusterParams::edits`]; not after a resume).
+    record: Option<Record>,
+    /// What the last refinement computed and kept.
+    refined: RefineStats,
     budget: Budget,
     has_emitters: bool,
     resumed: bool,
@@ -77,6 +87,23 @@ impl Sweeps {
             solving: Duration::ZERO,
         }
     }
+}
+
+/// What a geometry edit of a clustered bake did ([`ClusterBake::edit_geometry`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GeometryEdit {
+    /// Links whose form factor was computed (wholly hidden ones included).
+    pub computed: u64,
+    /// Links kept from before the edit.
+    pub kept: u64,
+    /// Links after the edit.
+    pub links: usize,
+    /// Nodes (triangles, their subdivisions and clusters) that are old ones.
+    pub kept_nodes: usize,
+    /// Nodes after the edit.
+    pub nodes: usize,
+    /// Seconds the edit took, the solve not included.
+    pub seconds: f64,
 }
 
 /// The fingerprint of what clustered links depend on: the per-triangle bake's, and the
@@ -184,7 +211,9 @@ impl ClusterBake {
         let has_emitters = source.iter().flatten().any(|&v| v > 0.0);
         let n = mesh.element_count();
         let resumed = saved.is_some();
-        let (sys, refinement_used, b) = match saved {
+        let oracle = Oracle::new(&mesh, &tree, &rho, &source);
+        let mut refined = RefineStats::default();
+        let (sys, refinement_used, b, record) = match saved {
             Some(sv) => {
                 if sv.dead.len() != n || sv.nodes != tree.len() {
                     return Err(CheckpointError::OtherMesh {
@@ -201,12 +230,12 @@ impl ClusterBake {
                 }
                 budget.reserve("the links", sv.rows.src.len() as u64 * LINK_BYTES)?;
                 let sys = HierSystem::from_rows(&mesh, &tree, sv.rows, rho, source, sv.dead);
-                (sys, sv.refinement, Some(sv.radiosity))
+                (sys, sv.refinement, Some(sv.radiosity), None)
             }
             None if has_emitters => {
                 let dead = crate::hierarchy::enclosed_elements(&mesh, &bvh, params.ff.seed);
-                let inputs = (&mesh, &tree, &bvh, &rho[..], &source[..]);
-                let (parts, eps) = refine_within_budget(
+                let inputs = (&mesh, &tree, &bvh as &dyn Visibility, &oracle);
+                let (record, eps, stats) = refine_within_budget(
                     inputs,
                     params,
                     cp,
@@ -214,15 +243,17 @@ impl ClusterBake {
                     &mut warnings,
                     progress,
                     stop,
+                    None,
                 )?;
-                let sys = HierSystem::new(&mesh, &tree, parts, rho, source, dead)?;
-                (sys, eps, None)
+                let sys = HierSystem::new(&mesh, &tree, &record.links, rho, source, dead)?;
+                refined = stats;
+                (sys, eps, None, cp.edits.then_some(record))
             }
             None => {
                 warnings
                     .push("no emitters and no lights: nothing to bake, all radiosity is 0".into());
-                let sys = HierSystem::new(&mesh, &tree, Vec::new(), rho, source, vec![false; n])?;
-                (sys, params.links.refinement, None)
+                let sys = HierSystem::new(&mesh, &tree, &[], rho, source, vec![false; n])?;
+                (sys, params.links.refinement, None, None)
             }
         };
         times.form_factors = lap();
@@ -243,6 +274,9 @@ impl ClusterBake {
             cp: *cp,
             fingerprint,
             refinement_used,
+            oracle,
+            record,
+            refined,
             budget,
             has_emitters,
             resumed,
@@ -416,6 +450,11 @@ impl ClusterBake {
         self.sys.links()
     }
 
+    /// The links in rows by receiver node (mesh nodes, then clusters).
+    pub fn rows(&self) -> super::solve::RowsRef<'_> {
+        self.sys.rows()
+    }
+
     /// Changes the surfaces' reflectance and emission and continues from the current
     /// solution: the links are kept (they do not depend on colour; refinement used the old
     /// estimates, as the per-triangle bake's edits do). Returns [`BakeError::NeedsRebuild`]
@@ -462,6 +501,131 @@ impl ClusterBake {
         result
     }
 
+    /// Moves, adds or removes static geometry (the scene's materials and lights come along) and
+    /// refines only what the edit touches. Triangles are matched to the old ones by surface
+    /// name, index within the surface and exact position ([`RootMatch`]); a cluster of the same
+    /// triangles is the same cluster. The refinement is walked again from the root's
+    /// self-link beside the old one's record: a pair of old nodes whose estimates below them
+    /// are unchanged and whose shaft meets nothing that moved keeps all that was refined of
+    /// it; other links are computed, but an old link's form factor is kept where its nodes and
+    /// sample count are the old ones and its shaft is clear. Visibility rays are seeded by the
+    /// nodes' own triangles, so the links equal a fresh bake's bit for bit. Direct light and
+    /// enclosed elements are computed again; the sweeps warm-start from the current light,
+    /// carried to the triangles that stayed.
+    ///
+    /// [`BakeError::NeedsRebuild`] when the scene's bounding box changed (every local
+    /// coordinate would), when nothing emits before or after, or when the surfaces were
+    /// renumbered. Without the record (a resumed bake, or [`ClusterParams::edits`] off) every
+    /// link is refined again, to the same result.
+    pub fn edit_geometry(
+        &mut self,
+        scene: &Scene,
+        progress: &(dyn Fn(Phase, usize, usize) + Sync),
+        stop: Option<&AtomicBool>,
+    ) -> Result<GeometryEdit, BakeError> {
+        let started = Instant::now();
+        let scene = input::static_scene(scene);
+        let scene = scene.as_ref();
+        input::validate(scene)?;
+        if !self.has_emitters || !scene.has_emitters() {
+            return Err(BakeError::NeedsRebuild);
+        }
+        let mut budget = Budget::new(Some(self.budget.limit));
+        let mesh = Mesh::adaptive(scene, &self.params.mesh, &mut |b| {
+            budget.reserve("the mesh", b)
+        })?;
+        if mesh.frame != self.mesh.frame {
+            return Err(BakeError::NeedsRebuild);
+        }
+        reserve_buffers(&mesh, &mut budget)?;
+        let matched = RootMatch::new(&self.mesh, &mesh);
+        if matched.unchanged() && scene.surfaces == self.surfaces {
+            return Ok(GeometryEdit {
+                links: self.sys.links(),
+                ..GeometryEdit::default()
+            });
+        }
+        let masks = input::masks(scene);
+        let bvh = input::visibility(&mesh, masks.as_ref());
+        let tree = Tree::new(&mesh);
+        let lighting = Lighting::new(scene, &mesh, &bvh, masks, &self.params.ff);
+        let (rho, source) = lighting.terms(&scene.surfaces, &mesh);
+        if !source.iter().flatten().any(|&v| v > 0.0) {
+            // Lights that reach nothing: a fresh bake would say so and build no links.
+            return Err(BakeError::NeedsRebuild);
+        }
+        let dead = crate::hierarchy::enclosed_elements(&mesh, &bvh, self.params.ff.seed);
+        let oracle = Oracle::new(&mesh, &tree, &rho, &source);
+        let before = self.record.as_ref().map(|record| {
+            Before::new(
+                Old {
+                    mesh: &self.mesh,
+                    tree: &self.tree,
+                    record,
+                    bhat: &self.oracle.bhat,
+                    rho: &self.oracle.rmax,
+                    eps: self.refinement_used,
+                },
+                New {
+                    mesh: &mesh,
+                    tree: &tree,
+                    bhat: &oracle.bhat,
+                    rho: &oracle.rmax,
+                },
+                &matched,
+            )
+        });
+        let kept_nodes = before.as_ref().map_or(0, Before::kept_nodes);
+        let mut warnings = scene.warnings();
+        let inputs = (&mesh, &tree, &bvh as &dyn Visibility, &oracle);
+        let (record, eps, stats) = refine_within_budget(
+            inputs,
+            &self.params,
+            &self.cp,
+            &mut budget,
+            &mut warnings,
+            progress,
+            stop,
+            before.as_ref(),
+        )?;
+        drop(before);
+        let sys = HierSystem::new(&mesh, &tree, &record.links, rho, source, dead)?;
+        // The current light, carried to the elements that stayed; the others start from their
+        // sources.
+        let mut b = matched.carry(&self.b);
+        for (i, &o) in matched.old_of_new_leaf.iter().enumerate() {
+            if o == u32::MAX {
+                b[i] = sys.source[i];
+            }
+        }
+        let nodes = tree.len();
+        self.fingerprint = fingerprint(scene, &self.params, &self.cp);
+        self.mesh = mesh;
+        self.tree = tree;
+        self.sys = sys;
+        self.surfaces = scene.surfaces.clone();
+        self.lighting = lighting;
+        self.refinement_used = eps;
+        self.oracle = oracle;
+        self.record = self.cp.edits.then_some(record);
+        self.refined = stats;
+        self.budget = budget;
+        self.resumed = false;
+        self.b = b;
+        self.warnings = warnings;
+        let s = &mut self.sweeps;
+        (s.stall, s.last_update, s.since_start, s.stalled) = (Stall::default(), f64::NAN, 0, None);
+        s.info.converged = false;
+        Ok(GeometryEdit {
+            computed: stats.computed,
+            kept: stats.kept,
+            links: self.sys.links(),
+            kept_nodes,
+            nodes,
+            seconds: started.elapsed().as_secs_f64(),
+        })
+    }
+
     /// Writes the links and the current solution to `path` (version 3), atomically.
     pub fn write_checkpoint(&self, path: &Path) -> Result<(), BakeError> {
         crate::checkpoint::write_clustered(
@@ -501,6 +665,7 @@ impl ClusterBake {
                 clusters: self.tree.clusters.len(),
                 cluster_receiver_links,
                 cluster_source_links,
+                form_factors: self.refined.computed,
                 refinement_asked: self.params.links.refinement,
                 refinement_used: self.refinement_used,
                 memory_limit: self.budget.limit,
@@ -527,76 +692,98 @@ impl ClusterBake {
     }
 }
 
+/// The estimates refinement reads, per node (mesh nodes, then clusters): `B̂` relative to the
+/// ambient level (mesh nodes: the largest in the subtree; clusters: the area-weighted mean, so
+/// `B̂ A` is the cluster's power) and the largest reflectance.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct Oracle {
+    pub bhat: Vec<f64>,
+    pub rmax: Vec<f64>,
+}
+
+impl Oracle {
+    fn new(mesh: &Mesh, tree: &Tree, rho: &[Rgb], source: &[Rgb]) -> Oracle {
+        let max3 = |v: &Rgb| v[0].max(v[1]).max(v[2]);
+        let bmesh = crate::hierarchy::Estimates::new(mesh, rho, source, 1.0).bhat;
+        let m = mesh.nodes.len();
+        let total = tree.len();
+        let mut bhat = bmesh;
+        bhat.resize(total, 0.0);
+        let mut rmax: Vec<f64> = vec![0.0; total];
+        for (i, &id) in mesh.leaves.iter().enumerate() {
+            rmax[id as usize] = max3(&rho[i]);
+        }
+        for nd in (0..m).rev() {
+            let node = &mesh.nodes[nd];
+            if !node.is_leaf() {
+                rmax[nd] = (0..4)
+                    .map(|k| rmax[(node.first_child + k) as usize])
+                    .fold(0.0, f64::max);
+            }
+        }
+        for c in (0..tree.clusters.len()).rev() {
+            let cl = &tree.clusters[c];
+            let [a, b] = cl.children.map(|x| x as usize);
+            let id = m + c;
+            let (wa, wb) = (tree.area[a], tree.area[b]);
+            bhat[id] = if wa + wb > 0.0 {
+                (wa * bhat[a] + wb * bhat[b]) / (wa + wb)
+            } else {
+                0.0
+            };
+            rmax[id] = rmax[a].max(rmax[b]);
+        }
+        Oracle { bhat, rmax }
+    }
+}
+
 /// Refines the links within the budget, coarsening if allowed; returns them with the
-/// threshold used.
+/// threshold used. `before`: the refinement before a geometry edit, whose untouched parts are
+/// kept (used only at its own threshold).
+#[allow(clippy::too_many_arguments)]
 fn refine_within_budget(
-    (mesh, tree, bvh, rho, source): (&Mesh, &Tree, &Bvh, &[Rgb], &[Rgb]),
+    (mesh, tree, vis, oracle): (&Mesh, &Tree, &dyn Visibility, &Oracle),
     params: &BakeParams,
     cp: &ClusterParams,
     budget: &mut Budget,
     warnings: &mut Vec<String>,
     progress: &(dyn Fn(Phase, usize, usize) + Sync),
     stop: Option<&AtomicBool>,
-) -> Result<(Vec<Vec<refine::Link>>, f64), BakeError> {
-    let max3 = |v: &Rgb| v[0].max(v[1]).max(v[2]);
-    let bmesh = crate::hierarchy::Estimates::new(mesh, rho, source, 1.0).bhat;
-    let m = mesh.nodes.len();
-    let total = tree.len();
-    // Clusters: area-weighted means (B̂ A is the cluster's power); mesh nodes keep their max.
-    let mut bhat = bmesh;
-    bhat.resize(total, 0.0);
-    let mut rmax: Vec<f64> = vec![0.0; total];
-    for (i, &id) in mesh.leaves.iter().enumerate() {
-        rmax[id as usize] = max3(&rho[i]);
-    }
-    for nd in (0..m).rev() {
-        let node = &mesh.nodes[nd];
-        if !node.is_leaf() {
-            rmax[nd] = (0..4)
-                .map(|k| rmax[(node.first_child + k) as usize])
-                .fold(0.0, f64::max);
-        }
-    }
-    for c in (0..tree.clusters.len()).rev() {
-        let cl = &tree.clusters[c];
-        let [a, b] = cl.children.map(|x| x as usize);
-        let id = m + c;
-        let (wa, wb) = (tree.area[a], tree.area[b]);
-        bhat[id] = if wa + wb > 0.0 {
-            (wa * bhat[a] + wb * bhat[b]) / (wa + wb)
-        } else {
-            0.0
-        };
-        rmax[id] = rmax[a].max(rmax[b]);
-    }
+    before: Option<&Before<'_>>,
+) -> Result<(Record, f64, RefineStats), BakeError> {
     let asked = params.links.refinement;
     let mut eps = asked;
     for attempt in 0..=COARSEN_STEPS {
-        let max_links = budget.left() / LINK_BYTES;
+        // Room for the links and, at about a byte each, the pairs the record keeps.
+        let max_links = budget.left() / (LINK_BYTES + 8);
         let r = refine::Refiner {
             mesh,
             tree,
-            vis: bvh,
-            bhat: &bhat,
-            rho: &rmax,
+            vis,
+            bhat: &oracle.bhat,
+            rho: &oracle.rmax,
             eps,
             kind: params.form_factors,
             samples: cp.samples,
             seed: params.ff.seed,
             max_links,
             stop,
+            before: before.filter(|b| b.eps == eps),
         };
         let t = Instant::now();
-        if let Some(parts) = r.build(&|d, n| progress(Phase::Links, d, n)) {
-            let count: u64 = parts.iter().map(|p| p.len() as u64).sum();
-            budget.reserve("the links", count * LINK_BYTES)?;
+        if let Some((record, stats)) = r.build(&|d, n| progress(Phase::Links, d, n)) {
+            budget.reserve("the links", record.links.len() as u64 * LINK_BYTES)?;
+            budget.reserve(
+                "the refinement's record",
+                record.bytes() - record.links.len() as u64 * 12,
+            )?;
             if attempt > 0 {
                 warnings.push(format!(
                     "the memory limit of {} MiB made the bake coarser: refinement {eps} instead of {asked}",
                     budget.limit >> 20
                 ));
             }
-            return Ok((parts, eps));
+            return Ok((record, eps, stats));
         }
         if stop.is_some_and(|f| f.load(Ordering::Relaxed)) {
             return Err(BakeError::Stopped);

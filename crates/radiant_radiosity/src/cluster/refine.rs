@@ -18,6 +18,8 @@ use glam::DVec3;
 use radiant_visibility::Visibility;
 use rayon::prelude::*;
 
+use super::edit::Before;
+use super::record::{Op, Pos, Record};
 use super::tree::Tree;
 use crate::form_factors::{FormFactorKind, analytic::point_to_triangle, sample_triangle};
 use crate::mesh::Mesh;
@@ -40,8 +42,49 @@ enum Step {
     Cull,
     /// Link them; the estimate of what the link carries, relative to the threshold.
     Link(f64),
-    /// Refine these pairs instead.
-    Split([(u32, u32); 4], usize),
+    /// Refine these pairs instead (the split recorded as `Op`).
+    Split(Op, [(u32, u32); 4], usize),
+}
+
+/// Where a pair stands in the refinement an edit keeps ([`Before`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Cursor {
+    /// The old refinement visited the pair (old node ids) at `pos` of its record: the same
+    /// nodes, or for nodes that changed, the old nodes in their place in the tree.
+    At {
+        /// The pair's op in the old record.
+        pos: Pos,
+        /// Old receiver.
+        r: u32,
+        /// Old source.
+        s: u32,
+    },
+    /// Not known yet: looked up when both nodes are old ones.
+    Unknown,
+    /// Not visited, but the old refinement visited the pair `(r, s)` at `pos`, which holds
+    /// this one, and split one of this pair's own nodes there: a pair below may still have been
+    /// visited, and is looked up from there.
+    Near {
+        /// The holding pair's op in the old record.
+        pos: Pos,
+        /// Old receiver.
+        r: u32,
+        /// Old source.
+        s: u32,
+    },
+    /// The old refinement stopped above the pair (linked or culled a pair holding it), so it
+    /// visited nothing below it either.
+    Above,
+}
+
+/// What to do with a pair.
+enum Visit {
+    /// Copy the old record's subtree `[from, to)`.
+    Copy(Pos, Pos),
+    Cull,
+    /// Link, with the old form factor when it holds (0 for a hidden link).
+    Link(f64, Option<f32>),
+    Split(Op, [(u32, u32); 4], usize, [Cursor; 4]),
 }
 
 /// A link with a cluster on one end is also held to a bound: what it could carry with its
@@ -77,6 +120,26 @@ pub(crate) struct Refiner<'a> {
     pub max_links: u64,
     /// Set from outside to stop early ([`Refiner::build`] then returns `None` too).
     pub stop: Option<&'a AtomicBool>,
+    /// The refinement before a geometry edit: what it refined for pairs the edit did not
+    /// touch is copied, not refined again.
+    pub before: Option<&'a Before<'a>>,
+}
+
+/// How much of a refinement was computed, and how much kept from the one before an edit.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RefineStats {
+    /// Links whose form factor was computed (hidden ones too).
+    pub computed: u64,
+    /// Links kept from before the edit (hidden ones not counted).
+    pub kept: u64,
+}
+
+/// Counters shared by the parallel parts of one refinement.
+struct Shared {
+    count: AtomicU64,
+    computed: AtomicU64,
+    kept: AtomicU64,
+    abort: AtomicBool,
 }
 
 /// The smallest mean cosine a cluster is credited with towards a source, against dividing by
@@ -99,106 +162,257 @@ const ABOVE: u32 = 2;
 const FRONTIER: usize = 4096;
 
 impl Refiner<'_> {
-    /// All links from the root's self-link, in a fixed order (independent of threads), or
-    /// `None` when there would be more than `max_links`. `progress(done, total)` is called as
+    /// All links from the root's self-link as a [`Record`], depth first (so the same for any
+    /// number of threads, and for an edit as for a fresh refinement), or `None` when there
+    /// would be more than `max_links` or it was stopped. `progress(done, total)` is called as
     /// parts finish.
-    pub fn build(&self, progress: &(dyn Fn(usize, usize) + Sync)) -> Option<Vec<Vec<Link>>> {
+    pub fn build(&self, progress: &(dyn Fn(usize, usize) + Sync)) -> Option<(Record, RefineStats)> {
         let root = self.tree.root(self.mesh);
-        let mut frontier = vec![(root, root)];
-        let mut first = Vec::new();
-        while frontier.len() < FRONTIER {
+        // The top of the recursion, breadth first into at least FRONTIER pieces of work; each
+        // level's splits name their children's place in the next level. In an edit, a pair the
+        // old refinement visited goes to the parallel part at once (it is mostly copied), and
+        // the rest, around what moved, is spread out.
+        let mut levels: Vec<Vec<Top>> = vec![vec![Top::Work(usize::MAX)]];
+        let start = self.before.map_or(Cursor::Unknown, |b| b.root_cursor());
+        let mut frontier = vec![(root, root, start, 0)];
+        let mut work: Vec<Work> = Vec::new();
+        while !frontier.is_empty() && frontier.len() < FRONTIER {
+            let l = levels.len() - 1;
+            let mut level = Vec::with_capacity(frontier.len() * 4);
             let mut next = Vec::with_capacity(frontier.len() * 4);
-            let mut split = false;
-            for &(r, s) in &frontier {
-                match self.step(r, s) {
-                    Step::Cull => {}
-                    Step::Link(e) => self.link(r, s, e, &mut first),
-                    Step::Split(p, n) => {
-                        next.extend_from_slice(&p[..n]);
-                        split = true;
+            for &(r, s, cur, slot) in &frontier {
+                levels[l][slot] = match self.visit(r, s, cur) {
+                    Visit::Split(op, pairs, n, cursors) => {
+                        let first = level.len();
+                        for k in 0..n {
+                            let (r, s) = pairs[k];
+                            if self.before.is_some_and(|b| b.same_pair(r, s, cursors[k])) {
+                                level.push(Top::Work(work.len()));
+                                work.push(Work::Refine(r, s, cursors[k]));
+                            } else {
+                                next.push((r, s, cursors[k], level.len()));
+                                level.push(Top::Work(usize::MAX));
+                            }
+                        }
+                        Top::Split(op, first, n)
                     }
-                }
+                    v => {
+                        work.push(Work::Done(r, s, v));
+                        Top::Work(work.len() - 1)
+                    }
+                };
             }
+            levels.push(level);
             frontier = next;
-            if !split {
-                break;
+        }
+        if let Some(last) = levels.last_mut() {
+            for &(r, s, cur, slot) in &frontier {
+                last[slot] = Top::Work(work.len());
+                work.push(Work::Refine(r, s, cur));
             }
         }
-        let count = AtomicU64::new(first.len() as u64);
-        let abort = AtomicBool::new(false);
+        let shared = Shared {
+            count: AtomicU64::new(0),
+            computed: AtomicU64::new(0),
+            kept: AtomicU64::new(0),
+            abort: AtomicBool::new(false),
+        };
         let done = AtomicUsize::new(0);
-        let total = frontier.len();
+        let total = work.len();
         let chunk = (total / (rayon::current_num_threads() * 16)).clamp(1, 64);
-        let mut parts: Vec<Vec<Link>> = frontier
+        let chunks: Vec<Vec<Record>> = work
             .par_chunks(chunk)
-            .map(|pairs| {
-                let mut out = Vec::new();
-                for &(r, s) in pairs {
-                    if self.stop.is_some_and(|f| f.load(Ordering::Relaxed)) {
-                        abort.store(true, Ordering::Relaxed);
-                        break;
-                    }
-                    if !self.run(r, s, &mut out, &count, &abort) {
-                        break;
-                    }
-                }
-                let d = done.fetch_add(pairs.len(), Ordering::Relaxed) + pairs.len();
+            .map(|items| {
+                let out: Vec<Record> = items
+                    .iter()
+                    .map(|w| {
+                        let mut rec = Record::default();
+                        if !shared.abort.load(Ordering::Relaxed) {
+                            self.run(w, &mut rec, &shared);
+                        }
+                        rec
+                    })
+                    .collect();
+                let d = done.fetch_add(items.len(), Ordering::Relaxed) + items.len();
                 progress(d, total);
                 out
             })
             .collect();
-        if abort.load(Ordering::Relaxed) {
+        let mut pieces: Vec<Record> = chunks.into_iter().flatten().collect();
+        if shared.abort.load(Ordering::Relaxed) {
             return None;
         }
-        parts.insert(0, first);
-        Some(parts)
+        let mut record = Record::default();
+        // Everything at once, so the record is not grown (and copied) piece by piece.
+        let splits = levels
+            .iter()
+            .flatten()
+            .filter(|t| matches!(t, Top::Split(..)))
+            .count();
+        record
+            .ops
+            .reserve_exact(splits + pieces.iter().map(|p| p.ops.len()).sum::<usize>());
+        record
+            .links
+            .reserve_exact(pieces.iter().map(|p| p.links.len()).sum());
+        record
+            .sized
+            .reserve_exact(splits + pieces.iter().map(|p| p.sized.len()).sum::<usize>());
+        assemble(&levels, 0, 0, &mut pieces, &mut record);
+        let stats = RefineStats {
+            computed: shared.computed.load(Ordering::Relaxed),
+            kept: shared.kept.load(Ordering::Relaxed),
+        };
+        Some((record, stats))
     }
 
-    /// Refines `r ← s` depth-first into `out`; false when the link budget ran out.
-    fn run(
+    /// One piece of work into `out`.
+    fn run(&self, w: &Work, out: &mut Record, shared: &Shared) {
+        match *w {
+            Work::Refine(r, s, cur) => {
+                let mut since = 0;
+                self.refine(r, s, cur, out, shared, &mut since);
+                self.count(since, shared);
+            }
+            Work::Done(r, s, ref v) => {
+                let mut since = 0;
+                self.emit(r, s, v, out, shared, &mut since);
+                self.count(since, shared);
+            }
+        }
+    }
+
+    /// Counts `links` against the budget and the stop flag; false once the refinement must
+    /// stop.
+    fn count(&self, links: u64, shared: &Shared) -> bool {
+        let c = shared.count.fetch_add(links, Ordering::Relaxed) + links;
+        if c > self.max_links || self.stop.is_some_and(|f| f.load(Ordering::Relaxed)) {
+            shared.abort.store(true, Ordering::Relaxed);
+        }
+        !shared.abort.load(Ordering::Relaxed)
+    }
+
+    /// Refines `r ← s` depth first into `out`; false once the refinement must stop.
+    fn refine(
         &self,
         r: u32,
         s: u32,
-        out: &mut Vec<Link>,
-        count: &AtomicU64,
-        abort: &AtomicBool,
+        cur: Cursor,
+        out: &mut Record,
+        shared: &Shared,
+        since: &mut u64,
     ) -> bool {
-        let mut stack = vec![(r, s)];
-        let mut since = 0u64;
-        while let Some((r, s)) = stack.pop() {
-            match self.step(r, s) {
-                Step::Cull => {}
-                Step::Link(e) => {
-                    let before = out.len();
-                    self.link(r, s, e, out);
-                    since += (out.len() - before) as u64;
-                    if since >= 1024 {
-                        let c = count.fetch_add(since, Ordering::Relaxed) + since;
-                        since = 0;
-                        if c > self.max_links {
-                            abort.store(true, Ordering::Relaxed);
-                        }
-                        if abort.load(Ordering::Relaxed) {
-                            return false;
-                        }
+        match self.visit(r, s, cur) {
+            Visit::Split(op, pairs, n, cursors) => {
+                let start = out.open_split(op, n);
+                for k in 0..n {
+                    if !self.refine(pairs[k].0, pairs[k].1, cursors[k], out, shared, since) {
+                        return false;
                     }
                 }
-                Step::Split(p, n) => stack.extend(p[..n].iter().rev()),
+                out.close_split(start);
             }
+            v => self.emit(r, s, &v, out, shared, since),
         }
-        count.fetch_add(since, Ordering::Relaxed);
+        if *since >= 1024 {
+            let links = std::mem::take(since);
+            return self.count(links, shared);
+        }
         true
     }
 
-    fn link(&self, r: u32, s: u32, err: f64, out: &mut Vec<Link>) {
-        let f = self.form_factor(r, s, err);
-        if f > 0.0 {
-            out.push(Link {
-                recv: r,
-                src: s,
-                ff: f as f32,
-            });
+    /// Records a visit that is not a split.
+    fn emit(&self, r: u32, s: u32, v: &Visit, out: &mut Record, shared: &Shared, since: &mut u64) {
+        match *v {
+            Visit::Copy(from, to) => {
+                let Some(b) = self.before else { return };
+                out.copy_from(b.record, from, to, |l| b.remap(l));
+                let links = to.links - from.links;
+                shared.kept.fetch_add(links, Ordering::Relaxed);
+                *since += links;
+            }
+            Visit::Cull => out.push(Op::Cull, None),
+            Visit::Link(err, reuse) => {
+                let f = match reuse {
+                    Some(f) => {
+                        shared.kept.fetch_add(u64::from(f > 0.0), Ordering::Relaxed);
+                        f
+                    }
+                    None => {
+                        shared.computed.fetch_add(1, Ordering::Relaxed);
+                        self.form_factor(r, s, err) as f32
+                    }
+                };
+                if f > 0.0 {
+                    out.push(
+                        Op::Link,
+                        Some(Link {
+                            recv: r,
+                            src: s,
+                            ff: f,
+                        }),
+                    );
+                    *since += 1;
+                } else {
+                    out.push(Op::Zero, None);
+                }
+            }
+            Visit::Split(..) => {}
         }
+    }
+
+    /// What to do with `r ← s`: copy what was refined for it before an edit, or decide.
+    fn visit(&self, r: u32, s: u32, cur: Cursor) -> Visit {
+        let Some(b) = self.before else {
+            return match self.step(r, s) {
+                Step::Cull => Visit::Cull,
+                Step::Link(e) => Visit::Link(e, None),
+                Step::Split(op, p, n) => Visit::Split(op, p, n, [Cursor::Unknown; 4]),
+            };
+        };
+        // An old pair followed by position (through nodes that changed) that is not this
+        // pair of old nodes: looked up by what they are.
+        let cur = match cur {
+            Cursor::At { .. } if !b.positions_agree(r, s, cur) => b.lookup(r, s, Cursor::Unknown),
+            Cursor::Unknown | Cursor::Near { .. } => b.lookup(r, s, cur),
+            c => c,
+        };
+        if let Cursor::At { pos, .. } = cur
+            && b.settled(r)
+            && b.settled(s)
+            && b.same_pair(r, s, cur)
+            && b.clear_of_changes(self.tree, r, s)
+        {
+            return Visit::Copy(pos, b.record.skip(pos));
+        }
+        match self.step(r, s) {
+            Step::Cull => Visit::Cull,
+            Step::Link(e) => Visit::Link(e, self.reuse(b, r, s, e, cur)),
+            Step::Split(op, p, n) => Visit::Split(op, p, n, b.child_cursors(op, n, cur)),
+        }
+    }
+
+    /// The old form factor of a link, when it was linked before the edit, with as many
+    /// samples, and nothing that moved can cross it.
+    fn reuse(&self, b: &Before<'_>, r: u32, s: u32, err: f64, cur: Cursor) -> Option<f32> {
+        let Cursor::At { pos, r: ro, s: so } = cur else {
+            return None;
+        };
+        let op = b.record.op(pos);
+        if !matches!(op, Op::Link | Op::Zero)
+            || !b.same_pair(r, s, cur)
+            || !b.clear_of_changes(self.tree, r, s)
+        {
+            return None;
+        }
+        let old = carry_err(b.tree, b.rho, b.bhat, ro, so) / b.eps;
+        if self.samples_for(err) != self.samples_for(old) {
+            return None;
+        }
+        Some(match op {
+            Op::Link => b.record.link(pos).ff,
+            _ => 0.0,
+        })
     }
 
     fn splittable(&self, id: u32) -> bool {
@@ -235,7 +449,7 @@ impl Refiner<'_> {
             return match self.tree.cluster(r) {
                 Some(c) => {
                     let [a, b] = c.children;
-                    Step::Split([(a, a), (a, b), (b, a), (b, b)], 4)
+                    Step::Split(Op::SplitSelf, [(a, a), (a, b), (b, a), (b, b)], 4)
                 }
                 // A triangle does not see itself.
                 None => Step::Cull,
@@ -264,8 +478,7 @@ impl Refiner<'_> {
         let gap = d2.sqrt() - (rr + rs);
         // What the link may carry at the centres' distance, relative to the threshold.
         let carry = self.rho[r as usize] * self.bhat[s as usize] * t.area[s as usize] / PI;
-        let est = carry / d2;
-        let err = if est.is_finite() { est } else { f64::MAX };
+        let err = carry_err(t, self.rho, self.bhat, r, s);
         // Spheres apart; between two triangles that is enough, with a cluster on an end its
         // bound at the gap must hold too.
         let apart = gap > 0.0 && (r < m && s < m || carry / (gap * gap) <= NEAR_BOUND * self.eps);
@@ -279,13 +492,13 @@ impl Refiner<'_> {
             for k in 0..n {
                 out[k] = (c[k], s);
             }
-            Step::Split(out, n)
+            Step::Split(Op::SplitRecv, out, n)
         } else {
             let (c, n) = self.children(s);
             for k in 0..n {
                 out[k] = (r, c[k]);
             }
-            Step::Split(out, n)
+            Step::Split(Op::SplitSrc, out, n)
         }
     }
 
@@ -317,16 +530,21 @@ impl Refiner<'_> {
         (sample_triangle(&node.v, a, b), node.normal)
     }
 
-    /// The form factor of `r ← s`, visibility included.
-    fn form_factor(&self, r: u32, s: u32, err: f64) -> f64 {
-        // Samples by what the link may carry: one where it is far below the threshold, the
-        // full count near it, `ABOVE` times that on links above it that could not be split.
-        let n = if err > 1.0 {
+    /// Visibility samples for a link carrying `err` times the threshold.
+    fn samples_for(&self, err: f64) -> u32 {
+        if err > 1.0 {
             self.samples.saturating_mul(ABOVE)
         } else {
             (f64::from(self.samples) * err).ceil() as u32
         }
-        .clamp(1, self.samples.saturating_mul(ABOVE).max(1));
+        .clamp(1, self.samples.saturating_mul(ABOVE).max(1))
+    }
+
+    /// The form factor of `r ← s`, visibility included.
+    fn form_factor(&self, r: u32, s: u32, err: f64) -> f64 {
+        // Samples by what the link may carry: one where it is far below the threshold, the
+        // full count near it, `ABOVE` times that on links above it that could not be split.
+        let n = self.samples_for(err);
         let mut rng = Rng::new(hash(self.seed, self.stable_id(r), self.stable_id(s)));
         let m = self.tree.mesh_nodes;
         if r < m && s < m {
@@ -442,5 +660,42 @@ impl Refiner<'_> {
             return if clear { f0 } else { 0.0 };
         }
         f0 * clear / valid
+    }
+}
+
+/// What `r ← s` may carry at the centres' distance (relative to the ambient level):
+/// `ρ_r B̂_s A_s / (π d²)`, `f64::MAX` where that is not finite.
+pub(crate) fn carry_err(tree: &Tree, rho: &[f64], bhat: &[f64], r: u32, s: u32) -> f64 {
+    let d2 = (tree.center[r as usize] - tree.center[s as usize]).length_squared();
+    let est = rho[r as usize] * bhat[s as usize] * tree.area[s as usize] / PI / d2;
+    if est.is_finite() { est } else { f64::MAX }
+}
+
+/// A piece of the refinement's parallel part.
+enum Work {
+    /// Refine the pair depth first.
+    Refine(u32, u32, Cursor),
+    /// Decided at the top (not a split).
+    Done(u32, u32, Visit),
+}
+
+/// The top of the recursion: a split whose children are `n` entries of the next level from
+/// the one named, or a piece of work.
+enum Top {
+    Split(Op, usize, usize),
+    Work(usize),
+}
+
+/// Writes the top's entry `i` of level `l` and what lies below it into `out`, depth first.
+fn assemble(levels: &[Vec<Top>], l: usize, i: usize, pieces: &mut [Record], out: &mut Record) {
+    match levels[l][i] {
+        Top::Split(op, first, n) => {
+            let start = out.open_split(op, n);
+            for k in 0..n {
+                assemble(levels, l + 1, first + k, pieces, out);
+            }
+            out.close_split(start);
+        }
+        Top::Work(w) => out.append(std::mem::take(&mut pieces[w])),
     }
 }

@@ -87,31 +87,30 @@ pub struct RowsRef<'a> {
 /// Per channel, nine harmonics coefficients.
 type Sh3 = [[f64; 9]; 3];
 
-/// Bytes a link costs while links are built and then held (the parts, then the rows).
+/// Bytes a link costs while links are built and then held (the refinement's record, then the
+/// rows).
 pub const LINK_BYTES: u64 = (std::mem::size_of::<Link>() + 4 + 4) as u64;
 
 impl HierSystem {
-    /// Assembles the rows from the refinement's parts (consumed one by one).
+    /// Assembles the rows from the refinement's links, in their order within each row.
     pub fn new(
         mesh: &Mesh,
         tree: &Tree,
-        parts: Vec<Vec<Link>>,
+        links: &[Link],
         rho: Vec<Rgb>,
         source: Vec<Rgb>,
         dead: Vec<bool>,
     ) -> Result<HierSystem, BakeError> {
         let nodes = tree.len();
-        let total: usize = parts.iter().map(Vec::len).sum();
+        let total = links.len();
         let oom = |what| BakeError::OutOfMemory {
             what,
             needed: total as u64 * 8,
             limit: 0,
         };
         let mut row = vec![0u64; nodes + 1];
-        for p in &parts {
-            for l in p {
-                row[l.recv as usize + 1] += 1;
-            }
+        for l in links {
+            row[l.recv as usize + 1] += 1;
         }
         for i in 0..nodes {
             row[i + 1] += row[i];
@@ -123,13 +122,11 @@ impl HierSystem {
         ff.try_reserve_exact(total).map_err(|_| oom("links"))?;
         ff.resize(total, 0.0);
         let mut fill = row.clone();
-        for p in parts {
-            for l in p {
-                let k = fill[l.recv as usize] as usize;
-                fill[l.recv as usize] += 1;
-                src[k] = l.src;
-                ff[k] = l.ff;
-            }
+        for l in links {
+            let k = fill[l.recv as usize] as usize;
+            fill[l.recv as usize] += 1;
+            src[k] = l.src;
+            ff[k] = l.ff;
         }
         drop(fill);
         Ok(Self::from_rows(

@@ -1,0 +1,407 @@
+//! Geometry edits of a clustered bake: which nodes of the edited scene are the old ones, what
+//! moved, and where the old refinement visited a pair of old nodes.
+//!
+//! A node of the edited scene *is* an old node when it holds the same triangles, unmoved: an
+//! input triangle matched by [`RootMatch`] (surface, index in it, exact position), a cluster
+//! whose two children are an old cluster's two children. Its box, area, harmonics and ray
+//! seeds are then the old ones bit for bit ([`super::tree`] computes them from the children
+//! only). It is *settled* when its estimates and every estimate below it are the old ones too:
+//! then refinement decides below it exactly as before. A pair of settled nodes whose shaft
+//! (the capsule around both bounding spheres) meets nothing that moved keeps everything the old
+//! refinement made of it, bit for bit, so the edit copies it from the [`Record`].
+
+use glam::DVec3;
+
+use super::record::{Op, Pos, Record};
+use super::refine::{Cursor, Link};
+use super::tree::Tree;
+use crate::hierarchy::RootMatch;
+use crate::mesh::Mesh;
+
+/// No node.
+const NONE: u32 = u32::MAX;
+
+/// Room left around what moved: past the `f32` rounding of the rays' ends and the ray caster's
+/// watertight slack (the local frame has unit extent).
+const MARGIN: f64 = 1e-5;
+
+/// At most this many spheres stand for what moved.
+const SPHERES: usize = 32;
+
+/// The bake before a geometry edit, as the edited refinement reads it.
+pub(crate) struct Before<'a> {
+    /// The old tree.
+    pub tree: &'a Tree,
+    /// The old mesh.
+    pub mesh: &'a Mesh,
+    /// The old refinement.
+    pub record: &'a Record,
+    /// The old estimates (per old node).
+    pub bhat: &'a [f64],
+    /// The old largest reflectance per old node.
+    pub rho: &'a [f64],
+    /// The old threshold.
+    pub eps: f64,
+    /// Per new node: the old node it is, or [`NONE`].
+    old_of_new: Vec<u32>,
+    /// Per old node: the new node it is, or [`NONE`].
+    new_of_old: Vec<u32>,
+    /// Per new node: an old node whose estimates, and all below it, are the old ones.
+    settled: Vec<bool>,
+    /// Bounding spheres (local frame) of the triangles that came and went.
+    changed: Vec<(DVec3, f64)>,
+    /// A sphere around all of them.
+    all_changed: (DVec3, f64),
+}
+
+/// The old bake's parts an edit needs.
+pub(crate) struct Old<'a> {
+    pub mesh: &'a Mesh,
+    pub tree: &'a Tree,
+    pub record: &'a Record,
+    pub bhat: &'a [f64],
+    pub rho: &'a [f64],
+    pub eps: f64,
+}
+
+/// The edited scene's parts an edit needs.
+pub(crate) struct New<'a> {
+    pub mesh: &'a Mesh,
+    pub tree: &'a Tree,
+    pub bhat: &'a [f64],
+    pub rho: &'a [f64],
+}
+
+impl<'a> Before<'a> {
+    /// Matches the edited scene's nodes against the old ones.
+    pub fn new(old: Old<'a>, new: New<'_>, matched: &RootMatch) -> Before<'a> {
+        let nm = new.tree.mesh_nodes as usize;
+        let mut old_of_new = vec![NONE; new.tree.len()];
+        let mut new_of_old = vec![NONE; old.tree.len()];
+        for (o, &n) in matched.new_of_old_node.iter().enumerate() {
+            if n != NONE {
+                old_of_new[n as usize] = o as u32;
+                new_of_old[o] = n;
+            }
+        }
+        // Clusters, children first: an old cluster when its children are one's children.
+        for c in (0..new.tree.clusters.len()).rev() {
+            let [a, b] = new.tree.clusters[c].children;
+            let (oa, ob) = (old_of_new[a as usize], old_of_new[b as usize]);
+            if oa == NONE || ob == NONE {
+                continue;
+            }
+            let p = old.tree.parent[oa as usize];
+            if p == NONE || p != old.tree.parent[ob as usize] {
+                continue;
+            }
+            if old
+                .tree
+                .cluster(p)
+                .is_some_and(|pc| pc.children == [oa, ob])
+            {
+                old_of_new[nm + c] = p;
+                new_of_old[p as usize] = (nm + c) as u32;
+            }
+        }
+        // Settled, children first: mesh nodes (children after parents), then clusters.
+        let mut settled = vec![false; new.tree.len()];
+        let same = |n: usize| {
+            let o = old_of_new[n];
+            o != NONE
+                && new.bhat[n].to_bits() == old.bhat[o as usize].to_bits()
+                && new.rho[n].to_bits() == old.rho[o as usize].to_bits()
+        };
+        for n in (0..nm).rev() {
+            let node = &new.mesh.nodes[n];
+            settled[n] = same(n)
+                && (node.is_leaf() || (0..4).all(|k| settled[(node.first_child + k) as usize]));
+        }
+        for c in (0..new.tree.clusters.len()).rev() {
+            let n = nm + c;
+            let [a, b] = new.tree.clusters[c].children;
+            settled[n] = same(n) && settled[a as usize] && settled[b as usize];
+        }
+        let changed = spheres(&matched.changed_triangles(old.mesh, new.mesh));
+        let all_changed = around(&changed);
+        Before {
+            tree: old.tree,
+            mesh: old.mesh,
+            record: old.record,
+            bhat: old.bhat,
+            rho: old.rho,
+            eps: old.eps,
+            old_of_new,
+            new_of_old,
+            settled,
+            changed,
+            all_changed,
+        }
+    }
+
+    /// The root pair's cursor: the old root pair, in its place.
+    pub fn root_cursor(&self) -> Cursor {
+        if self.record.ops.is_empty() {
+            return Cursor::Unknown;
+        }
+        let root = self.tree.root(self.mesh);
+        Cursor::At {
+            pos: Pos::default(),
+            r: root,
+            s: root,
+        }
+    }
+
+    /// Whether `cur` is the old pair of the same nodes as `r ← s`.
+    #[inline]
+    pub fn same_pair(&self, r: u32, s: u32, cur: Cursor) -> bool {
+        matches!(cur, Cursor::At { r: ro, s: so, .. }
+            if self.old_of_new[r as usize] == ro && self.old_of_new[s as usize] == so)
+    }
+
+    /// Whether a cursor followed by position agrees with what `r` and `s` are: an old node in
+    /// the pair must be the very node the cursor names (a node that changed has no old self,
+    /// and takes whatever stood in its place).
+    #[inline]
+    pub fn positions_agree(&self, r: u32, s: u32, cur: Cursor) -> bool {
+        let Cursor::At { r: ro, s: so, .. } = cur else {
+            return false;
+        };
+        let agree = |n: u32, o: u32| {
+            let old = self.old_of_new[n as usize];
+            old == NONE || old == o
+        };
+        agree(r, ro) && agree(s, so)
+    }
+
+    /// Whether new node `n` is an old one with the old estimates all below it.
+    #[inline]
+    pub fn settled(&self, n: u32) -> bool {
+        self.settled[n as usize]
+    }
+
+    /// Whether nothing that moved comes near the shaft of `r ← s` (new nodes, `tree` the new
+    /// tree): the capsule around the segment between their centres, as wide as the larger
+    /// bounding sphere, holds every segment between points of the two.
+    pub fn clear_of_changes(&self, tree: &Tree, r: u32, s: u32) -> bool {
+        let (a, b) = (tree.center[r as usize], tree.center[s as usize]);
+        let wide = tree.radius[r as usize].max(tree.radius[s as usize]);
+        let ab = b - a;
+        let len2 = ab.length_squared();
+        let clear = |&(c, radius): &(DVec3, f64)| {
+            let t = if len2 > 0.0 {
+                ((c - a).dot(ab) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            (a + ab * t).distance(c) > wide + radius + MARGIN
+        };
+        clear(&self.all_changed) || self.changed.iter().all(clear)
+    }
+
+    /// An old link in the new numbering (both its nodes are old ones).
+    #[inline]
+    pub fn remap(&self, l: Link) -> Link {
+        Link {
+            recv: self.new_of_old[l.recv as usize],
+            src: self.new_of_old[l.src as usize],
+            ff: l.ff,
+        }
+    }
+
+    /// The old children of old node `id` (none for an element).
+    fn old_children(&self, id: u32) -> ([u32; 4], usize) {
+        match self.tree.cluster(id) {
+            Some(c) => ([c.children[0], c.children[1], 0, 0], 2),
+            None => match self.mesh.nodes[id as usize].first_child {
+                crate::mesh::NO_CHILD => ([0; 4], 0),
+                f => ([f, f + 1, f + 2, f + 3], 4),
+            },
+        }
+    }
+
+    /// The old pairs a split of the old pair `(r, s)` made.
+    fn old_pairs(&self, op: Op, r: u32, s: u32) -> [(u32, u32); 4] {
+        match op {
+            Op::SplitSelf => {
+                let (c, _) = self.old_children(r);
+                let (a, b) = (c[0], c[1]);
+                [(a, a), (a, b), (b, a), (b, b)]
+            }
+            Op::SplitRecv => {
+                let (c, _) = self.old_children(r);
+                c.map(|x| (x, s))
+            }
+            _ => {
+                let (c, _) = self.old_children(s);
+                c.map(|x| (r, x))
+            }
+        }
+    }
+
+    /// The cursors of the children of a split `op` into `n` pairs, at a pair whose cursor is
+    /// `cur`.
+    pub fn child_cursors(&self, op: Op, n: usize, cur: Cursor) -> [Cursor; 4] {
+        let Cursor::At { pos, r, s } = cur else {
+            // Near: the pair that holds this one holds its children too.
+            return [cur; 4];
+        };
+        let old = self.record.op(pos);
+        if old != op {
+            // Split another way: the children may still be found below; linked or culled:
+            // nothing below was visited.
+            return [if old.is_split() {
+                Cursor::Near { pos, r, s }
+            } else {
+                Cursor::Above
+            }; 4];
+        }
+        // Followed by position, the old node split may have another number of children.
+        let split = if op == Op::SplitSrc { s } else { r };
+        if self.old_children(split).1 != n && op != Op::SplitSelf {
+            return [Cursor::Near { pos, r, s }; 4];
+        }
+        let pairs = self.old_pairs(op, r, s);
+        let mut out = [Cursor::Unknown; 4];
+        let mut p = self.record.first_child(pos);
+        for k in 0..n {
+            out[k] = Cursor::At {
+                pos: p,
+                r: pairs[k].0,
+                s: pairs[k].1,
+            };
+            if k + 1 < n {
+                p = self.record.skip(p);
+            }
+        }
+        out
+    }
+
+    /// Where the old refinement visited the pair of new nodes `r ← s`, when both are old
+    /// ones: followed down the old record from the root, or from the pair a [`Cursor::Near`]
+    /// names.
+    pub fn lookup(&self, r: u32, s: u32, from: Cursor) -> Cursor {
+        let (x, y) = (self.old_of_new[r as usize], self.old_of_new[s as usize]);
+        if x == NONE || y == NONE || self.record.ops.is_empty() {
+            return from;
+        }
+        let (ax, ay) = (self.ancestors(x), self.ancestors(y));
+        // The child of `a` on the way down to the node whose ancestors are `anc`.
+        let toward = |a: u32, anc: &[u32]| -> Option<usize> {
+            let (c, n) = self.old_children(a);
+            c[..n].iter().position(|ch| anc.contains(ch))
+        };
+        let root = self.tree.root(self.mesh);
+        let (mut a, mut b, mut pos) = match from {
+            Cursor::Near { pos, r, s } => (r, s, pos),
+            _ => (root, root, Pos::default()),
+        };
+        loop {
+            if a == x && b == y {
+                return Cursor::At { pos, r: a, s: b };
+            }
+            let op = self.record.op(pos);
+            let k = match op {
+                Op::Cull | Op::Link | Op::Zero => return Cursor::Above,
+                // The split passed one of the nodes itself: the pair was not visited, but
+                // pairs below it may have been.
+                Op::SplitSelf if a == x || b == y => return Cursor::Near { pos, r: a, s: b },
+                Op::SplitRecv if a == x => return Cursor::Near { pos, r: a, s: b },
+                Op::SplitSrc if b == y => return Cursor::Near { pos, r: a, s: b },
+                Op::SplitSelf => {
+                    let (Some(i), Some(j)) = (toward(a, &ax), toward(b, &ay)) else {
+                        return Cursor::Unknown;
+                    };
+                    let (c, _) = self.old_children(a);
+                    (a, b) = (c[i], c[j]);
+                    2 * i + j
+                }
+                Op::SplitRecv => {
+                    let Some(i) = toward(a, &ax) else {
+                        return Cursor::Unknown;
+                    };
+                    a = self.old_children(a).0[i];
+                    i
+                }
+                Op::SplitSrc => {
+                    let Some(j) = toward(b, &ay) else {
+                        return Cursor::Unknown;
+                    };
+                    b = self.old_children(b).0[j];
+                    j
+                }
+            };
+            let mut p = self.record.first_child(pos);
+            for _ in 0..k {
+                p = self.record.skip(p);
+            }
+            pos = p;
+        }
+    }
+
+    /// Old node `x` and its ancestors.
+    fn ancestors(&self, x: u32) -> Vec<u32> {
+        let mut out = Vec::with_capacity(48);
+        let mut n = x;
+        while n != NONE {
+            out.push(n);
+            n = self.tree.parent[n as usize];
+        }
+        out
+    }
+
+    /// New nodes that are old ones.
+    pub fn kept_nodes(&self) -> usize {
+        self.old_of_new.iter().filter(|&&o| o != NONE).count()
+    }
+}
+
+/// A sphere around `spheres` (none: an empty one far away).
+fn around(spheres: &[(DVec3, f64)]) -> (DVec3, f64) {
+    let (lo, hi) = spheres.iter().fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), &(c, r)| (lo.min(c - r), hi.max(c + r)),
+    );
+    if spheres.is_empty() {
+        return (DVec3::splat(1e30), 0.0);
+    }
+    ((lo + hi) * 0.5, (hi - lo).length() * 0.5)
+}
+
+/// At most [`SPHERES`] bounding spheres around `triangles`: split along the longest axis of
+/// their centroids until there are that many groups.
+fn spheres(triangles: &[[DVec3; 3]]) -> Vec<(DVec3, f64)> {
+    let mut groups: Vec<Vec<[DVec3; 3]>> = vec![triangles.to_vec()];
+    while groups.len() < SPHERES {
+        let Some((i, _)) = groups
+            .iter()
+            .enumerate()
+            .filter(|(_, g)| g.len() > 1)
+            .max_by_key(|(_, g)| g.len())
+        else {
+            break;
+        };
+        let mut g = groups.swap_remove(i);
+        let centroid = |t: &[DVec3; 3]| (t[0] + t[1] + t[2]) / 3.0;
+        let (lo, hi) = g.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), t| (lo.min(centroid(t)), hi.max(centroid(t))),
+        );
+        let axis = (hi - lo).max_position();
+        g.sort_by(|a, b| centroid(a)[axis].total_cmp(&centroid(b)[axis]));
+        let rest = g.split_off(g.len() / 2);
+        groups.push(g);
+        groups.push(rest);
+    }
+    groups
+        .iter()
+        .filter(|g| !g.is_empty())
+        .map(|g| {
+            let (lo, hi) = g.iter().flatten().fold(
+                (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+                |(lo, hi), v| (lo.min(*v), hi.max(*v)),
+            );
+            ((lo + hi) * 0.5, (hi - lo).length() * 0.5)
+        })
+        .collect()
+}
