@@ -94,9 +94,10 @@ pub(super) struct Edit {
 /// The bake a worker drives: per-triangle, or clustered for a level (see
 /// `radiant_radiosity::cluster::suits`); the links of both follow material, light and geometry
 /// edits.
+/// Boxed, both: each is over a kilobyte of state besides its buffers.
 pub(super) enum Engine {
-    Triangles(Bake),
-    Clustered(ClusterBake),
+    Triangles(Box<Bake>),
+    Clustered(Box<ClusterBake>),
 }
 
 /// A bake between workers, with what its reports need.
@@ -194,9 +195,9 @@ impl Engine {
         if let Some(path) = setup.checkpoint.as_deref().filter(|p| p.exists()) {
             let resumed = if level {
                 ClusterBake::resume(scene, &setup.params, &setup.cluster, path)
-                    .map(Engine::Clustered)
+                    .map(|b| Engine::Clustered(Box::new(b)))
             } else {
-                Bake::resume(scene, &setup.params, path).map(Engine::Triangles)
+                Bake::resume(scene, &setup.params, path).map(|b| Engine::Triangles(Box::new(b)))
             };
             match resumed {
                 Ok(e) => return Ok(e),
@@ -214,9 +215,11 @@ impl Engine {
                 }
             };
             let (params, cp) = (&setup.params, &setup.cluster);
-            ClusterBake::new(scene, params, cp, &progress, Some(&inbox.stop)).map(Engine::Clustered)
+            ClusterBake::new(scene, params, cp, &progress, Some(&inbox.stop))
+                .map(|b| Engine::Clustered(Box::new(b)))
         } else {
-            Bake::with_progress(scene, &setup.params, &progress).map(Engine::Triangles)
+            Bake::with_progress(scene, &setup.params, &progress)
+                .map(|b| Engine::Triangles(Box::new(b)))
         }
     }
 
