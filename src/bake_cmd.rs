@@ -120,21 +120,23 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     };
     args.solve.init_threads()?;
     let job = prepare(args, solver)?;
-    let clustered = use_clustered(
-        args.hierarchy.hierarchy,
-        args.spectral,
-        &job.scene,
-        &job.params,
-    )?;
-    let mut result = if clustered {
+    let clustered = use_clustered(args.hierarchy.hierarchy, &job.scene, &job.params)?;
+    // Read before the bake, so that a bad spectra file fails at once.
+    let materials = match args.spectral {
+        true => Some(spectral_materials(job.shipped, args.spectra.as_deref())?),
+        false => None,
+    };
+    let (mut result, solved) = if clustered {
         bake_clustered(
             &job.scene,
             &job.params,
             &args.hierarchy,
             args.checkpoint.as_deref(),
+            materials.as_ref().map(|m| (m, args.bands)),
         )?
     } else {
-        bake_triangles(&job.scene, &job.params, args.checkpoint.as_deref())?
+        let r = bake_triangles(&job.scene, &job.params, args.checkpoint.as_deref())?;
+        (r, None)
     };
     let error = match &job.reference {
         Some((name, rows)) => Some((
@@ -144,10 +146,9 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         None => None,
     };
     let points = job.shipped.and_then(|s| rgb_points(&job.scene, &result, s));
-    let spectral = if args.spectral {
-        spectral(args, &job, &mut result)?
-    } else {
-        serde_json::Value::Null
+    let spectral = match &materials {
+        Some(m) => spectral(args, &job, &mut result, m, solved)?,
+        None => serde_json::Value::Null,
     };
     let written = write_outputs(args, &job, &result)?;
     let total_s = job.start.elapsed().as_secs_f64();
@@ -245,25 +246,32 @@ fn rgb_points(scene: &Scene, result: &BakeResult, shipped: ShippedReferences) ->
         .ok()
 }
 
-/// Solves again in wavelength bands, reports how far that is from the RGB bake (and from
-/// spectral path tracing, where the scene ships points), writes the RGB surfaces to
-/// `surfaces_rgb.csv` and puts the spectral answer in `result`. Returns the report's part.
+/// Solves again in wavelength bands (unless the clustered bake already did: `solved`),
+/// reports how far that is from the RGB bake (and from spectral path tracing, where the scene
+/// ships points), writes the RGB surfaces to `surfaces_rgb.csv` and puts the spectral answer
+/// in `result`. Returns the report's part.
 fn spectral(
     args: &BakeArgs,
     job: &Job,
     result: &mut BakeResult,
+    materials: &std::collections::HashMap<String, radiant::radiosity::spectral::SpectralMaterial>,
+    solved: Option<(radiant::radiosity::spectral::SpectralResult, f64)>,
 ) -> anyhow::Result<serde_json::Value> {
-    let t = Instant::now();
-    let materials = spectral_materials(job.shipped, args.spectra.as_deref())?;
-    let sp = radiant::radiosity::spectral::solve_spectral(
-        &result.system,
-        &result.mesh,
-        &job.scene.surfaces,
-        &materials,
-        args.bands,
-        job.params.solver_params.tolerance,
-    )?;
-    let seconds = t.elapsed().as_secs_f64();
+    let (sp, seconds) = match solved {
+        Some(s) => s,
+        None => {
+            let t = Instant::now();
+            let sp = radiant::radiosity::spectral::solve_spectral(
+                &result.system,
+                &result.mesh,
+                &job.scene.surfaces,
+                materials,
+                args.bands,
+                job.params.solver_params.tolerance,
+            )?;
+            (sp, t.elapsed().as_secs_f64())
+        }
+    };
     let d = metrics::surface_difference(&sp.surfaces, &result.surfaces);
     println!(
         "spectral ({} bands, {seconds:.3} s): differs from the RGB bake by {:.1} % on average, {:.1} % at most",

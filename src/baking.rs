@@ -1,8 +1,11 @@
 //! The bake as the commands run it: which hierarchy, with progress on a terminal and in the
 //! log, resuming from and writing checkpoints.
 
+use std::collections::HashMap;
 use std::path::Path;
 use std::time::Instant;
+
+use radiant::radiosity::spectral::{SpectralMaterial, SpectralResult};
 
 use radiant::radiosity::{BakeEvent, BakeParams, BakeResult};
 use radiant::scene::Scene;
@@ -13,13 +16,11 @@ use crate::common::progress_bar;
 /// Whether this bake uses the clustered hierarchy (see `--hierarchy`).
 pub(crate) fn use_clustered(
     hierarchy: Hierarchy,
-    spectral: bool,
     scene: &Scene,
     params: &BakeParams,
 ) -> anyhow::Result<bool> {
     use radiant::radiosity::{FormFactorKind, SolverKind};
     let needs_triangles = [
-        (spectral, "--spectral"),
         (
             !matches!(params.solver, SolverKind::GaussSeidel | SolverKind::Jacobi),
             "--method southwell or direct",
@@ -53,16 +54,21 @@ pub(crate) fn use_clustered(
     }
 }
 
+/// A spectral solve asked of a clustered bake: materials by name and bands.
+pub(crate) type SpectralAsk<'a> = (&'a HashMap<String, SpectralMaterial>, usize);
+
 /// A bake with the clustered hierarchy, with progress on a terminal and in the log. With a
 /// `checkpoint`, it resumes from it when it fits (else says why and bakes afresh), writes it
 /// once the links are built (a crash while solving then loses no refinement) and again at the
-/// end.
+/// end. With `spectral`, its links are solved again in bands before they are let go; that
+/// result comes back with the seconds it took.
 pub(crate) fn bake_clustered(
     scene: &Scene,
     params: &BakeParams,
     h: &crate::HierarchyArgs,
     checkpoint: Option<&Path>,
-) -> anyhow::Result<BakeResult> {
+    spectral: Option<SpectralAsk<'_>>,
+) -> anyhow::Result<(BakeResult, Option<(SpectralResult, f64)>)> {
     use radiant::radiosity::cluster::{ClusterBake, ClusterParams, Phase, Watch};
     let cp = ClusterParams {
         memory_limit: h.memory_limit,
@@ -117,6 +123,16 @@ pub(crate) fn bake_clustered(
     if let Some(path) = checkpoint {
         bake.write_checkpoint(path)?;
     }
+    let spectral = match spectral {
+        Some((materials, bands)) => {
+            pb.set_message(format!("spectral solve, {bands} bands"));
+            let t = Instant::now();
+            let tolerance = params.solver_params.tolerance;
+            let sp = bake.solve_spectral(materials, bands, tolerance)?;
+            Some((sp, t.elapsed().as_secs_f64()))
+        }
+        None => None,
+    };
     let result = bake.finish();
     pb.finish_and_clear();
     if let Some(c) = &result.report.clusters {
@@ -130,7 +146,7 @@ pub(crate) fn bake_clustered(
             c.memory_limit >> 20
         );
     }
-    Ok(result)
+    Ok((result, spectral))
 }
 
 /// A bake with the per-triangle hierarchy, resuming from and writing `checkpoint`.

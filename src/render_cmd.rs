@@ -126,10 +126,10 @@ fn bake(
     // No emitters: nothing to bake, and nothing is allocated for it.
     if scene.has_emitters() {
         let h = &args.hierarchy;
-        let clustered = baking::use_clustered(h.hierarchy, false, scene, params)?;
+        let clustered = baking::use_clustered(h.hierarchy, scene, params)?;
         let checkpoint = args.checkpoint.as_deref();
         Ok(Some(if clustered {
-            baking::bake_clustered(scene, params, h, checkpoint)?
+            baking::bake_clustered(scene, params, h, checkpoint, None)?.0
         } else {
             baking::bake_triangles(scene, params, checkpoint)?
         }))

@@ -306,6 +306,40 @@ fn spectral_bake_compares_with_rgb() {
             .expect("mean")
             .is_finite()
     );
+    // The clustered hierarchy solves in bands too (levels are no longer sent to the
+    // per-triangle bake for it).
+    let clustered = tmp("spectral-clustered");
+    let st = radiant()
+        .args([
+            "bake",
+            "--builtin",
+            "cornell-box",
+            "--hierarchy",
+            "clustered",
+            "--spectral",
+            "--bands",
+            "8",
+            "--out",
+        ])
+        .arg(&clustered)
+        .output()
+        .expect("runs");
+    assert!(
+        st.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(clustered.join("report.json")).expect("report"),
+    )
+    .expect("json");
+    assert_eq!(report["hierarchy"]["kind"], "clustered");
+    assert_eq!(report["spectral"]["bands"], 8);
+    assert_eq!(report["spectral"]["converged"], true);
+    let mean = report["spectral"]["vs_path_traced_points"]["mean_rel"]
+        .as_f64()
+        .expect("mean_rel");
+    assert!(mean.is_finite() && mean > 0.0 && mean < 0.5, "{mean}");
     // Spectral needs spectra: a scene file without --spectra is a clear error.
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/bad_inputs");
     let st = radiant()
@@ -466,7 +500,8 @@ fn clustered_bake_reports_its_hierarchy_and_memory_limit_refuses() {
             "cornell-box",
             "--hierarchy",
             "clustered",
-            "--spectral",
+            "--method",
+            "southwell",
             "--out",
         ])
         .arg(&out)

@@ -91,11 +91,88 @@ pub fn solve_spectral(
     bands: usize,
     tolerance: f64,
 ) -> Result<SpectralResult, BakeError> {
+    let params = SolverParams {
+        tolerance,
+        ..Default::default()
+    };
+    solve_in_bands(mesh, surfaces, materials, bands, |rho, source| {
+        let sys = system.with_materials(rho, source);
+        // The stopping rule of a bake: converged, or stalled.
+        let mut solve = Solve::new(SolverKind::GaussSeidel, &sys, params);
+        loop {
+            match solve.step(&sys, Duration::from_millis(25)) {
+                Ok(info) if info.converged => return Ok((solve.radiosity(&sys), true)),
+                Ok(_) => {}
+                Err(SolveError::Stalled { .. }) => return Ok((solve.radiosity(&sys), false)),
+                Err(e) => return Err(e.into()),
+            }
+        }
+    })
+}
+
+/// The spectral solve around any solver of three bands at a time: `solve3(ρ, source)` (per
+/// element, the three bands in the RGB slots) returns the radiosity and whether it converged.
+/// Bands are summed into XYZ and converted to linear sRGB.
+pub(crate) fn solve_in_bands(
+    mesh: &Mesh,
+    surfaces: &[Surface],
+    materials: &HashMap<String, SpectralMaterial>,
+    bands: usize,
+    mut solve3: impl FnMut(Vec<Rgb>, Vec<Rgb>) -> Result<(Vec<Rgb>, bool), BakeError>,
+) -> Result<SpectralResult, BakeError> {
     if !(3..=96).contains(&bands) {
         return Err(ParameterError::out_of_range("bands", bands as f64, "3..=96").into());
     }
     let cmf = band_cmf(bands);
-    // Per surface: band reflectance and band emission (scaled to the RGB emission's luminance).
+    let per_surface = surface_bands(surfaces, materials, bands, &cmf)?;
+    let n = mesh.element_count();
+    let surface_of: Vec<usize> = (0..n)
+        .map(|i| mesh.root_surface[mesh.nodes[mesh.leaves[i] as usize].root as usize] as usize)
+        .collect();
+    let mut xyz = vec![[0.0; 3]; n];
+    let mut converged = true;
+    for first in (0..bands).step_by(3) {
+        let pick = |b: usize| (first + b).min(bands - 1);
+        let rho: Vec<Rgb> = surface_of
+            .iter()
+            .map(|&s| std::array::from_fn(|k| per_surface[s].0[pick(k)]))
+            .collect();
+        let source: Vec<Rgb> = surface_of
+            .iter()
+            .map(|&s| std::array::from_fn(|k| per_surface[s].1[pick(k)]))
+            .collect();
+        let (b, ok) = solve3(rho, source)?;
+        converged &= ok;
+        for (k, band) in (first..(first + 3).min(bands)).enumerate() {
+            for i in 0..n {
+                for c in 0..3 {
+                    xyz[i][c] += b[i][k] * cmf[band][c];
+                }
+            }
+        }
+    }
+    let to_rgb = &cie::srgb_matrices().1;
+    let radiosity: Vec<Rgb> = xyz.iter().map(|x| cie::mul(to_rgb, *x)).collect();
+    let surfaces = surface_means(surfaces, mesh, &radiosity);
+    Ok(SpectralResult {
+        bands,
+        radiosity,
+        xyz,
+        surfaces,
+        converged,
+    })
+}
+
+/// One surface's band reflectance and band emission.
+type Bands = (Vec<f64>, Vec<f64>);
+
+/// Per surface: band reflectance and band emission (scaled to the RGB emission's luminance).
+fn surface_bands(
+    surfaces: &[Surface],
+    materials: &HashMap<String, SpectralMaterial>,
+    bands: usize,
+    cmf: &[[f64; 3]],
+) -> Result<Vec<Bands>, BakeError> {
     let mut per_surface = Vec::with_capacity(surfaces.len());
     for s in surfaces {
         let m = materials
@@ -118,7 +195,7 @@ pub fn solve_spectral(
         let emission = match (&m.emission, s.is_emitter()) {
             (Some(e), true) => {
                 let raw = band_means(e, bands);
-                let y: f64 = raw.iter().zip(&cmf).map(|(v, c)| v * c[1]).sum();
+                let y: f64 = raw.iter().zip(cmf).map(|(v, c)| v * c[1]).sum();
                 let target = radiant_color::luminance(s.emission);
                 if y.is_nan() || y <= 0.0 {
                     return Err(BakeError::InvalidMaterial {
@@ -132,57 +209,5 @@ pub fn solve_spectral(
         };
         per_surface.push((rho, emission));
     }
-    let n = system.len();
-    let surface_of: Vec<usize> = (0..n)
-        .map(|i| mesh.root_surface[mesh.nodes[mesh.leaves[i] as usize].root as usize] as usize)
-        .collect();
-    let mut xyz = vec![[0.0; 3]; n];
-    let params = SolverParams {
-        tolerance,
-        ..Default::default()
-    };
-    let mut converged = true;
-    for first in (0..bands).step_by(3) {
-        let pick = |b: usize| (first + b).min(bands - 1);
-        let rho: Vec<Rgb> = surface_of
-            .iter()
-            .map(|&s| std::array::from_fn(|k| per_surface[s].0[pick(k)]))
-            .collect();
-        let source: Vec<Rgb> = surface_of
-            .iter()
-            .map(|&s| std::array::from_fn(|k| per_surface[s].1[pick(k)]))
-            .collect();
-        let sys = system.with_materials(rho, source);
-        // The stopping rule of a bake: converged, or stalled.
-        let mut solve = Solve::new(SolverKind::GaussSeidel, &sys, params);
-        loop {
-            match solve.step(&sys, Duration::from_millis(25)) {
-                Ok(info) if info.converged => break,
-                Ok(_) => {}
-                Err(SolveError::Stalled { .. }) => {
-                    converged = false;
-                    break;
-                }
-                Err(e) => return Err(e.into()),
-            }
-        }
-        let b = solve.radiosity(&sys);
-        for (k, band) in (first..(first + 3).min(bands)).enumerate() {
-            for i in 0..n {
-                for c in 0..3 {
-                    xyz[i][c] += b[i][k] * cmf[band][c];
-                }
-            }
-        }
-    }
-    let to_rgb = &cie::srgb_matrices().1;
-    let radiosity: Vec<Rgb> = xyz.iter().map(|x| cie::mul(to_rgb, *x)).collect();
-    let surfaces = surface_means(surfaces, mesh, &radiosity);
-    Ok(SpectralResult {
-        bands,
-        radiosity,
-        xyz,
-        surfaces,
-        converged,
-    })
+    Ok(per_surface)
 }

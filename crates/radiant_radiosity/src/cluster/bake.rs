@@ -11,7 +11,7 @@ use radiant_visibility::Visibility;
 use super::edit::{Before, New, Old};
 use super::record::Record;
 use super::refine::RefineStats;
-use super::solve::{HierSystem, LINK_BYTES};
+use super::solve::{HierSystem, LINK_BYTES, Sweeping};
 use super::tree::Tree;
 use super::{
     Budget, COARSEN_STEPS, ClusterParams, ClusterReport, Phase, Sweep, Watch, check, refine,
@@ -25,7 +25,7 @@ use crate::params::BakeParams;
 use crate::report::{BakeReport, BakeResult, PhaseTimes, TimelinePoint};
 use crate::rng::Fnv;
 use crate::smooth::{SmoothField, element_emission};
-use crate::solve::{Info, SolveError, Stall};
+use crate::solve::{Info, SolveError};
 use crate::solvers::SolverKind;
 use crate::system::{Rgb, System};
 use crate::{BakeError, ParameterError};
@@ -63,9 +63,8 @@ pub struct ClusterBake {
 /// Where the sweeps stand.
 struct Sweeps {
     info: Info,
-    stall: Stall,
-    /// The last sweep's update (NaN before the first sweep since the start or an edit).
-    last_update: f64,
+    /// The stopping measure and the stall rule (afresh since the start or an edit).
+    rule: Sweeping,
     /// Sweeps since the start or the last edit.
     since_start: u64,
     stalled: Option<SolveError>,
@@ -79,8 +78,7 @@ impl Sweeps {
         info.converged = !has_emitters;
         Sweeps {
             info,
-            stall: Stall::default(),
-            last_update: f64::NAN,
+            rule: Sweeping::default(),
             since_start: 0,
             stalled: None,
             timeline: Vec::new(),
@@ -299,25 +297,11 @@ impl ClusterBake {
         }
         let t = Instant::now();
         let nb = self.sys.sweep(&self.b);
-        let diff: Vec<Rgb> = (nb.iter().zip(&self.b))
-            .map(|(x, y)| std::array::from_fn(|c| x[c] - y[c]))
-            .collect();
-        let bounced: Vec<Rgb> = (nb.iter().zip(&self.sys.source))
-            .map(|(x, s)| std::array::from_fn(|c| x[c] - s[c]))
-            .collect();
-        let (dn, bn) = (self.sys.norm(&diff), self.sys.norm(&bounced));
-        self.b = nb;
         let s = &mut self.sweeps;
+        let residual = s.rule.residual(&self.sys, &nb, &self.b, &self.sys.source);
+        self.b = nb;
         s.since_start += 1;
         let iterations = s.info.iterations + 1;
-        let update = if bn > 0.0 { dn / bn } else { 0.0 };
-        let q = if s.last_update > 0.0 {
-            (update / s.last_update).clamp(0.0, 0.9999)
-        } else {
-            0.5
-        };
-        s.last_update = update;
-        let residual = update * q / (1.0 - q);
         let tol = self.params.solver_params.tolerance;
         let converged = residual <= tol && s.since_start >= 2;
         // The residual is already an error estimate: contraction 0 keeps it as it is.
@@ -336,7 +320,7 @@ impl ClusterBake {
             unshot_fraction: 0.0,
         });
         if !converged {
-            s.stall.observe(residual, iterations)?;
+            s.rule.stall.observe(residual, iterations)?;
         }
         Ok(s.info)
     }
@@ -478,7 +462,7 @@ impl ClusterBake {
         self.surfaces = surfaces.to_vec();
         self.has_emitters = has_emitters;
         let s = &mut self.sweeps;
-        (s.stall, s.last_update, s.since_start, s.stalled) = (Stall::default(), f64::NAN, 0, None);
+        (s.rule, s.since_start, s.stalled) = (Sweeping::default(), 0, None);
         s.info.converged = !has_emitters;
         Ok(())
     }
@@ -614,7 +598,7 @@ impl ClusterBake {
         self.b = b;
         self.warnings = warnings;
         let s = &mut self.sweeps;
-        (s.stall, s.last_update, s.since_start, s.stalled) = (Stall::default(), f64::NAN, 0, None);
+        (s.rule, s.since_start, s.stalled) = (Sweeping::default(), 0, None);
         s.info.converged = false;
         Ok(GeometryEdit {
             computed: stats.computed,
@@ -624,6 +608,26 @@ impl ClusterBake {
             nodes,
             seconds: started.elapsed().as_secs_f64(),
         })
+    }
+
+    /// The links solved again in `bands` wavelength bands with spectral materials (by
+    /// material name, as [`crate::spectral::solve_spectral`]: reflectance spectra, emission
+    /// spectra scaled to the RGB emission's luminance; punctual lights and the sky, RGB only,
+    /// do not light it), by the bake's sweeps and stopping rule at `tolerance`.
+    pub fn solve_spectral(
+        &self,
+        materials: &std::collections::HashMap<String, crate::spectral::SpectralMaterial>,
+        bands: usize,
+        tolerance: f64,
+    ) -> Result<crate::spectral::SpectralResult, BakeError> {
+        let max = self.cp.max_sweeps;
+        crate::spectral::solve_in_bands(
+            &self.mesh,
+            &self.surfaces,
+            materials,
+            bands,
+            |rho, source| Ok(self.sys.solve_with(&rho, &source, tolerance, max)?),
+        )
     }
 
     /// Writes the links and the current solution to `path` (version 3), atomically.
