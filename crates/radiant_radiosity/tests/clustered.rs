@@ -87,8 +87,11 @@ fn a_finely_tessellated_box_bakes_like_the_plain_one() {
     );
     assert!(mean <= 0.005, "mean difference {:.3} %", mean * 100.0);
     assert!(worst <= 0.03, "largest difference {:.3} %", worst * 100.0);
+    // Measured 534 against 250: the plain box's large triangles get the cosine oracle's
+    // savings (402 without it), the fine box's many near cluster pairs are held to the
+    // cosine-free bound at their gap as before.
     assert!(
-        lpe(&b) <= 2.0 * lpe(&a),
+        lpe(&b) <= 2.5 * lpe(&a),
         "links per element {:.1} against {:.1}",
         lpe(&b),
         lpe(&a)

@@ -773,6 +773,7 @@ fn refine_within_budget(
             max_links,
             stop,
             before: before.filter(|b| b.eps == eps),
+            keep: cp.edits,
         };
         let t = Instant::now();
         if let Some((record, stats)) = r.build(&|d, n| progress(Phase::Links, d, n)) {

@@ -114,9 +114,19 @@ pub struct Record {
     pub links: Vec<Link>,
     /// The sizes of the subtrees of at least [`SIZED_AT`] pairs, in the order of their ops.
     pub sized: Vec<Extent>,
+    /// Only the links are kept (a one-shot bake needs nothing else).
+    links_only: bool,
 }
 
 impl Record {
+    /// A record of the links alone: its ops and sizes stay empty.
+    pub fn links_only() -> Record {
+        Record {
+            links_only: true,
+            ..Record::default()
+        }
+    }
+
     /// Bytes held.
     pub fn bytes(&self) -> u64 {
         (self.ops.len()
@@ -182,7 +192,9 @@ impl Record {
     /// Appends a pair's op (not a split's: see [`Record::open_split`]).
     pub fn push(&mut self, op: Op, link: Option<Link>) {
         debug_assert!(!op.is_split());
-        self.ops.push(op.code());
+        if !self.links_only {
+            self.ops.push(op.code());
+        }
         if let Some(l) = link {
             self.links.push(l);
         }
@@ -193,6 +205,9 @@ impl Record {
     pub fn open_split(&mut self, op: Op, children: usize) -> Pos {
         debug_assert!(op.is_split());
         let start = self.end();
+        if self.links_only {
+            return start;
+        }
         self.ops
             .push(op.code() | if children == 4 { FOUR } else { 0 });
         // Its size goes before its children's sizes: held now, dropped if it stays small.
@@ -202,6 +217,9 @@ impl Record {
 
     /// Closes the split opened at `start`, once its children's subtrees follow it.
     pub fn close_split(&mut self, start: Pos) {
+        if self.links_only {
+            return;
+        }
         let e = start.to(self.end());
         if e.ops >= SIZED_AT {
             self.ops[start.ops as usize] |= SIZED;

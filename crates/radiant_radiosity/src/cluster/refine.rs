@@ -123,6 +123,8 @@ pub(crate) struct Refiner<'a> {
     /// The refinement before a geometry edit: what it refined for pairs the edit did not
     /// touch is copied, not refined again.
     pub before: Option<&'a Before<'a>>,
+    /// Keep the whole record (for geometry edits), not the links alone.
+    pub keep: bool,
 }
 
 /// How much of a refinement was computed, and how much kept from the one before an edit.
@@ -226,7 +228,7 @@ impl Refiner<'_> {
                 let out: Vec<Record> = items
                     .iter()
                     .map(|w| {
-                        let mut rec = Record::default();
+                        let mut rec = self.empty();
                         if !shared.abort.load(Ordering::Relaxed) {
                             self.run(w, &mut rec, &shared);
                         }
@@ -242,7 +244,7 @@ impl Refiner<'_> {
         if shared.abort.load(Ordering::Relaxed) {
             return None;
         }
-        let mut record = Record::default();
+        let mut record = self.empty();
         // Everything at once, so the record is not grown (and copied) piece by piece.
         let splits = levels
             .iter()
@@ -264,6 +266,15 @@ impl Refiner<'_> {
             kept: shared.kept.load(Ordering::Relaxed),
         };
         Some((record, stats))
+    }
+
+    /// An empty record: whole, or the links alone.
+    fn empty(&self) -> Record {
+        if self.keep {
+            Record::default()
+        } else {
+            Record::links_only()
+        }
     }
 
     /// One piece of work into `out`.
@@ -405,7 +416,7 @@ impl Refiner<'_> {
         {
             return None;
         }
-        let old = carry_err(b.tree, b.rho, b.bhat, ro, so) / b.eps;
+        let old = carry_err(b.mesh, b.tree, b.rho, b.bhat, ro, so) / b.eps;
         if self.samples_for(err) != self.samples_for(old) {
             return None;
         }
@@ -427,6 +438,24 @@ impl Refiner<'_> {
             let f = self.mesh.nodes[id as usize].first_child;
             ([f, f + 1, f + 2, f + 3], 4)
         }
+    }
+
+    /// The normal of a cluster whose triangles all share it.
+    #[inline]
+    fn flat(&self, id: u32) -> Option<DVec3> {
+        let c = id.checked_sub(self.tree.mesh_nodes)?;
+        let cone = self.tree.cone[c as usize];
+        (cone.cos >= 1.0 - 1e-9).then_some(cone.axis)
+    }
+
+    /// The least `n·x` over cluster `id`'s box.
+    fn lowest(&self, id: u32, n: DVec3) -> f64 {
+        let c = self
+            .tree
+            .cluster(id)
+            .map_or((DVec3::ZERO, DVec3::ZERO), |c| (c.lo, c.hi));
+        let (mid, half) = ((c.0 + c.1) * 0.5, (c.1 - c.0) * 0.5);
+        n.dot(mid) - n.abs().dot(half)
     }
 
     /// How far any part of node `id` lies in front of the plane through `p0` with normal `n`.
@@ -472,15 +501,28 @@ impl Refiner<'_> {
                 return Step::Cull;
             }
         }
+        // The same for a flat cluster (its triangles' normals all one): nothing of the other
+        // node in front of its rearmost triangle (a wall's pieces among themselves).
+        if let Some(n) = self.flat(s)
+            && self.front(r, n, n * self.lowest(s, n)) <= tol
+        {
+            return Step::Cull;
+        }
+        if let Some(n) = self.flat(r)
+            && self.front(s, n, n * self.lowest(r, n)) <= tol
+        {
+            return Step::Cull;
+        }
         let t = self.tree;
         let (rr, rs) = (t.radius[r as usize], t.radius[s as usize]);
         let d2 = (t.center[r as usize] - t.center[s as usize]).length_squared();
         let gap = d2.sqrt() - (rr + rs);
         // What the link may carry at the centres' distance, relative to the threshold.
-        let carry = self.rho[r as usize] * self.bhat[s as usize] * t.area[s as usize] / PI;
-        let err = carry_err(t, self.rho, self.bhat, r, s);
+        let err = carry_err(self.mesh, t, self.rho, self.bhat, r, s);
         // Spheres apart; between two triangles that is enough, with a cluster on an end its
-        // bound at the gap must hold too.
+        // bound at the gap must hold too (without the cosines: with them, more near cluster
+        // links passed, and the tessellated furnace's rows strayed 0.25 % from 1).
+        let carry = self.rho[r as usize] * self.bhat[s as usize] * t.area[s as usize] / PI;
         let apart = gap > 0.0 && (r < m && s < m || carry / (gap * gap) <= NEAR_BOUND * self.eps);
         let (can_r, can_s) = (self.splittable(r), self.splittable(s));
         if (apart && err <= self.eps) || (!can_r && !can_s) {
@@ -517,7 +559,7 @@ impl Refiner<'_> {
     fn sample(&self, id: u32, u: f64, rng: &mut Rng) -> (DVec3, DVec3) {
         let node = match self.tree.cluster(id) {
             Some(c) => {
-                let t = self.tree.pick(self.mesh, c, u);
+                let t = self.tree.pick(c, u);
                 &self.mesh.nodes[self.mesh.roots[t as usize] as usize]
             }
             None => &self.mesh.nodes[id as usize],
@@ -665,9 +707,28 @@ impl Refiner<'_> {
 
 /// What `r ← s` may carry at the centres' distance (relative to the ambient level):
 /// `ρ_r B̂_s A_s / (π d²)`, `f64::MAX` where that is not finite.
-pub(crate) fn carry_err(tree: &Tree, rho: &[f64], bhat: &[f64], r: u32, s: u32) -> f64 {
-    let d2 = (tree.center[r as usize] - tree.center[s as usize]).length_squared();
-    let est = rho[r as usize] * bhat[s as usize] * tree.area[s as usize] / PI / d2;
+/// What `r ← s` may carry at the centres' distance (relative to the ambient level):
+/// `ρ_r B̂_s A_s cos θ_r cos θ_s / (π d²)`, each cosine at the centres (a triangle's; for a
+/// cluster the largest its cone of normals allows) widened by the angle the two bounding
+/// spheres span, `(r_r + r_s) / d`, and at most 1; `f64::MAX` where that is not finite. Without
+/// the cosines the oracle refined grazing pairs as if they faced each other: on the Cornell
+/// box the same error (0.63 % mean) took 1.42 M links instead of 0.94 M.
+pub(crate) fn carry_err(
+    mesh: &Mesh,
+    tree: &Tree,
+    rho: &[f64],
+    bhat: &[f64],
+    r: u32,
+    s: u32,
+) -> f64 {
+    let d = tree.center[s as usize] - tree.center[r as usize];
+    let d2 = d.length_squared();
+    let dist = d2.sqrt();
+    let slack = (tree.radius[r as usize] + tree.radius[s as usize]) / dist;
+    let cos = |id: u32, dir: DVec3| (tree.max_cos(mesh, id, dir / dist) + slack).clamp(0.0, 1.0);
+    let est = rho[r as usize] * bhat[s as usize] * tree.area[s as usize] / PI / d2
+        * cos(r, d)
+        * cos(s, -d);
     if est.is_finite() { est } else { f64::MAX }
 }
 

@@ -7,7 +7,8 @@
 //! nodes: one forward pass over the ids pushes down, one backward pass pulls up.
 //!
 //! A cluster depends only on the triangles it holds: its split, its order of triangles, its
-//! box, area and harmonics are computed from its children, never from its place in the whole.
+//! box, area and harmonics are computed from its children, never from its place in the whole
+//! (points are sampled on it by exact whole-number sums of its triangles' areas).
 //! So after a geometry edit, a cluster of the same triangles is the same cluster bit for bit,
 //! and what was refined for it can be kept ([`super::refine`]).
 
@@ -41,6 +42,10 @@ pub struct Tree {
     pub clusters: Vec<Cluster>,
     /// Input triangles in cluster order: each cluster covers a contiguous range.
     pub order: Vec<u32>,
+    /// Prefix sums of the triangles' areas in `order` (length `order.len() + 1`), in units
+    /// of 2⁻⁵² of the local frame: whole numbers, so the sums over a cluster's range are exact
+    /// and depend on its triangles only (sampling a point on a cluster by area).
+    pub cdf: Vec<u128>,
     /// Parent of every node (`u32::MAX` for the root).
     pub parent: Vec<u32>,
     /// Centre of every node's bounding sphere.
@@ -52,6 +57,83 @@ pub struct Tree {
     /// Per cluster: the area-weighted mean of its triangles' normals in spherical harmonics
     /// ([`super::sh`]), so `sh::dot(normal_sh, sh::cosine(d))` is the mean of `max(0, n·d)`.
     pub normal_sh: Vec<[f64; 9]>,
+    /// Per cluster: a cone holding all its triangles' normals, from its children's.
+    pub cone: Vec<Cone>,
+}
+
+/// A cone of directions: its unit axis and the cosine and sine of its half-angle (a half-angle
+/// of π or more: every direction).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Cone {
+    /// Unit axis.
+    pub axis: DVec3,
+    /// Cosine of the half-angle.
+    pub cos: f64,
+    /// Sine of the half-angle.
+    pub sin: f64,
+}
+
+impl Cone {
+    /// Every direction.
+    pub const ALL: Cone = Cone {
+        axis: DVec3::Z,
+        cos: -1.0,
+        sin: 0.0,
+    };
+
+    /// One direction.
+    pub fn of(n: DVec3) -> Cone {
+        Cone {
+            axis: n,
+            cos: 1.0,
+            sin: 0.0,
+        }
+    }
+
+    /// The largest cosine between a direction of the cone and the unit direction `d`.
+    #[inline]
+    pub fn max_cos(&self, d: DVec3) -> f64 {
+        if self.cos <= -1.0 {
+            return 1.0;
+        }
+        let c = self.axis.dot(d).clamp(-1.0, 1.0);
+        if c >= self.cos {
+            return 1.0;
+        }
+        // cos(α − θ) with α the angle to the axis, θ the half-angle (α > θ here).
+        c * self.cos + (1.0 - c * c).max(0.0).sqrt() * self.sin
+    }
+
+    /// The smallest cone holding both (a little wider, against rounding).
+    pub fn merge(a: Cone, b: Cone) -> Cone {
+        if a.cos <= -1.0 || b.cos <= -1.0 {
+            return Cone::ALL;
+        }
+        let (ta, tb) = (a.cos.clamp(-1.0, 1.0).acos(), b.cos.clamp(-1.0, 1.0).acos());
+        let phi = a.axis.dot(b.axis).clamp(-1.0, 1.0).acos();
+        if phi + tb <= ta {
+            return a;
+        }
+        if phi + ta <= tb {
+            return b;
+        }
+        let theta = (phi + ta + tb) / 2.0 + 1e-9;
+        if theta >= std::f64::consts::PI {
+            return Cone::ALL;
+        }
+        // The new axis: from a's axis towards b's by theta − ta.
+        let perp = (b.axis - a.axis * a.axis.dot(b.axis)).normalize_or_zero();
+        if perp == DVec3::ZERO {
+            return Cone::ALL;
+        }
+        let turn = theta - ta;
+        let axis = (a.axis * turn.cos() + perp * turn.sin()).normalize();
+        Cone {
+            axis,
+            cos: theta.cos(),
+            sin: theta.sin(),
+        }
+    }
 }
 
 impl Tree {
@@ -69,16 +151,26 @@ impl Tree {
             mesh_nodes: m,
             clusters: Vec::with_capacity(k.saturating_sub(1)),
             order: Vec::new(),
+            cdf: Vec::new(),
             parent: Vec::new(),
             center: Vec::new(),
             radius: Vec::new(),
             area: Vec::new(),
             normal_sh: Vec::new(),
+            cone: Vec::new(),
         };
         if k > 1 {
             tree.split(mesh, &centroids, &mut order, 0);
         }
         tree.order = order;
+        let mut cdf = Vec::with_capacity(k + 1);
+        let mut acc = 0u128;
+        cdf.push(acc);
+        for &t in &tree.order {
+            acc += fixed(mesh.nodes[mesh.roots[t as usize] as usize].area);
+            cdf.push(acc);
+        }
+        tree.cdf = cdf;
         let total = m as usize + tree.clusters.len();
         tree.parent = vec![u32::MAX; total];
         tree.center = Vec::with_capacity(total);
@@ -119,7 +211,25 @@ impl Tree {
             }
             tree.normal_sh[c] = if w > 0.0 { acc.map(|v| v / w) } else { acc };
         }
+        tree.cone = vec![Cone::ALL; tree.clusters.len()];
+        for c in (0..tree.clusters.len()).rev() {
+            let [a, b] = tree.clusters[c].children.map(|ch| match ch.checked_sub(m) {
+                Some(cc) => tree.cone[cc as usize],
+                None => Cone::of(mesh.nodes[ch as usize].normal),
+            });
+            tree.cone[c] = Cone::merge(a, b);
+        }
         tree
+    }
+
+    /// The largest cosine between the unit direction `d` and a normal of node `id` (a
+    /// triangle's own; a cluster's, bounded by its cone).
+    #[inline]
+    pub fn max_cos(&self, mesh: &Mesh, id: u32, d: DVec3) -> f64 {
+        match id.checked_sub(self.mesh_nodes) {
+            Some(c) => self.cone[c as usize].max_cos(d),
+            None => mesh.nodes[id as usize].normal.dot(d),
+        }
     }
 
     /// Clusters `items` (input triangles, a slice of the final order starting at `first`) and
@@ -212,25 +322,29 @@ impl Tree {
         self.parent.is_empty()
     }
 
-    /// The input triangle whose share of cluster `c`'s area holds `u` in `[0, 1)`: found by
-    /// going down the children by their areas, so it depends on the cluster only.
+    /// The input triangle whose share of cluster `c`'s area holds `u` in `[0, 1)`, by a binary
+    /// search of the exact prefix sums: it depends on the cluster only. A cluster of triangles
+    /// too small to count is sampled evenly.
     #[inline]
-    pub fn pick(&self, mesh: &Mesh, c: &Cluster, u: f64) -> u32 {
-        let (mut c, mut u) = (c, u);
-        loop {
-            let [a, b] = c.children;
-            let (wa, wb) = (self.area[a as usize], self.area[b as usize]);
-            let x = u * (wa + wb);
-            let (next, v) = if x < wa || wb <= 0.0 {
-                (a, if wa > 0.0 { x / wa } else { 0.0 })
-            } else {
-                (b, (x - wa) / wb)
-            };
-            u = v.clamp(0.0, 1.0);
-            match self.cluster(next) {
-                Some(cl) => c = cl,
-                None => return mesh.nodes[next as usize].root,
-            }
+    pub fn pick(&self, c: &Cluster, u: f64) -> u32 {
+        let (first, end) = (c.first as usize, c.end as usize);
+        let (a, b) = (self.cdf[first], self.cdf[end]);
+        if b == a {
+            let k = ((u * (end - first) as f64) as usize).min(end - first - 1);
+            return self.order[first + k];
         }
+        // u in 2⁻⁵³ steps, times the cluster's area: exact in 128 bits.
+        let x = a + (((b - a) * (u.clamp(0.0, 1.0) * (1u64 << 53) as f64) as u128) >> 53);
+        let k = self.cdf[first + 1..=end].partition_point(|&v| v <= x);
+        self.order[(first + k).min(end - 1)]
+    }
+}
+
+/// An area (local units, at most a few) as a whole number of 2⁻⁵² steps.
+fn fixed(area: f64) -> u128 {
+    if area.is_finite() && area > 0.0 {
+        (area * (1u64 << 52) as f64).round() as u128
+    } else {
+        0
     }
 }
