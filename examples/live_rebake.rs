@@ -1,8 +1,12 @@
 //! The in-editor case, headless: the Cornell box bakes in the background of a bevy_ecs world,
 //! then a wall's colour is edited, the block is moved and then removed; each rebake's error timeline is
 //! printed, measured against the converged answer, with the main schedule's cost per frame.
+//! Given a glTF level instead, it bakes the level (clustered) and moves one prop.
 //!
 //! `cargo run --release --example live_rebake [PATCH_SIZE]`
+//! `cargo run --release --example live_rebake SCENE.gltf [PREFIX [DX]]`: the surfaces whose names
+//! start with PREFIX moved by DX scene units along x (for Sponza,
+//! `../shared/scenes/sponza/Sponza_sun.gltf VaseRound.003 0.2`: a vase moved 20 cm).
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -78,8 +82,58 @@ fn report(what: &str, snaps: &[(f64, Arc<Vec<Rgb>>)], frames: &mut [f64]) {
 }
 
 fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match args.first() {
+        Some(path) if path.ends_with(".gltf") || path.ends_with(".glb") => level(path, &args[1..]),
+        size => cornell(size),
+    }
+}
+
+/// A level baked in the world, then one prop moved.
+fn level(path: &str, args: &[String]) -> anyhow::Result<()> {
+    let prefix = args.first().map_or("VaseRound.003", String::as_str);
+    let dx: f64 = args.get(1).map_or(Ok(0.2), |v| v.parse())?;
+    let scene = radiant::scene::load_gltf(std::path::Path::new(path))?;
+    let mut app = App::new();
+    app.add_plugins(RadiantPlugins)
+        .insert_resource(RadiosityBake::default());
+    spawn_scene(&mut app.world, &scene);
+    let t0 = Instant::now();
+    let (snaps, mut frames) = run(&mut app, t0);
+    let s = app.world.resource::<BakeStatus>().clone();
+    println!(
+        "{path}: {} elements, {} links; first bake converged in {:.2} s ({} sweeps)",
+        s.size.elements,
+        s.size.links,
+        t0.elapsed().as_secs_f64(),
+        s.progress.iterations
+    );
+    report("first bake", &snaps, &mut frames);
+
+    let mut q = app.world.query::<(&Name, &mut Transform)>();
+    let mut moved = 0;
+    for (n, mut t) in q.iter_mut(&mut app.world) {
+        if n.as_str().starts_with(prefix) {
+            t.translation.x += dx;
+            moved += 1;
+        }
+    }
+    anyhow::ensure!(moved > 0, "no surface of {path} is named {prefix}...");
+    let t0 = Instant::now();
+    let (snaps, mut frames) = run(&mut app, t0);
+    let s = app.world.resource::<BakeStatus>();
+    println!(
+        "\n{moved} surfaces named {prefix}... moved {dx} along x: {} form factors computed, {} links, {} builds in all",
+        s.counts.links_recomputed, s.size.links, s.counts.builds
+    );
+    report("move", &snaps, &mut frames);
+    Ok(())
+}
+
+/// The Cornell box: a wall recoloured, a block moved, then removed.
+fn cornell(size: Option<&String>) -> anyhow::Result<()> {
     let mut params = BakeParams::default();
-    if let Some(size) = std::env::args().nth(1) {
+    if let Some(size) = size {
         params.mesh.patch_size = size.parse()?;
     }
     let mut app = App::new();
