@@ -2,9 +2,9 @@
 //! whose names start with a prefix, and time the edit and each sweep after it, with the error
 //! of the light against where it converges (relative RMS over elements).
 //!
-//! `cargo run --release -p radiant_radiosity --example level_edit -- SCENE.gltf PREFIX DX DY DZ`
-//! (default: `../shared/scenes/sponza/Sponza_sun.gltf VaseRound.003 0.2 0 0`, a vase moved
-//! 20 cm).
+//! `cargo run --release -p radiant_radiosity --example level_edit -- SCENE.gltf PREFIX DX DY DZ
+//! [REFINEMENT]` (default: `../shared/scenes/sponza/Sponza_sun.gltf VaseRound.003 0.2 0 0`, a
+//! vase moved 20 cm, at the default refinement).
 
 use std::time::Instant;
 
@@ -49,7 +49,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         scene.triangles.len(),
         count(&scene)
     );
-    let params = BakeParams::default();
+    let mut params = BakeParams::default();
+    params.links.refinement = num(5, params.links.refinement);
     let cp = ClusterParams::default();
     let t = Instant::now();
     let mut bake = ClusterBake::new(&scene, &params, &cp, &|_, _, _| {}, None)?;
