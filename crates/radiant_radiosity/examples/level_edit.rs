@@ -65,14 +65,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let t = Instant::now();
     let e = bake.edit_geometry(&moved, &|_, _, _| {}, None)?;
     let edited = t.elapsed().as_secs_f64();
-    if std::env::var_os("LEVEL_EDIT_QUIT").is_some() {
-        println!("edit {edited:.3} s");
-        return Ok(());
-    }
     println!(
         "edit: {:.3} s, {} form factors computed, {} links kept, {} of {} nodes kept",
         e.seconds, e.computed, e.kept, e.kept_nodes, e.nodes
     );
+    let p = e.phases;
+    println!(
+        "  meshing {:.3} s, BVH and tree {:.3} s, direct light {:.3} s, matching {:.3} s, refinement {:.3} s, rows {:.3} s",
+        p.meshing, p.visibility, p.direct_light, p.matching, p.refinement, p.rows
+    );
+    println!("the edit returned after {edited:.3} s");
+    if std::env::var_os("LEVEL_EDIT_QUIT").is_some() {
+        return Ok(());
+    }
     // Each sweep's light, then the converged one to measure them against.
     let mut lights = vec![(0.0, bake.radiosity())];
     let t = Instant::now();

@@ -170,8 +170,25 @@ pub fn build(
 /// the cosine-distributed probe rays from them hits a back face. Such elements receive nothing and no
 /// receiver sees them, so they must not dilute the radiosity of the source nodes they belong to.
 pub fn enclosed_elements(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<bool> {
+    enclosed_elements_keeping(mesh, vis, seed, &|_, _| None)
+}
+
+/// Probe rays per element of [`enclosed_elements`].
+pub(crate) const PROBES: usize = 16;
+
+/// An element's probe rays, origins and directions as cast.
+pub(crate) type Probes = [(glam::Vec3, glam::Vec3); PROBES];
+
+/// [`enclosed_elements`], where `kept(element, probes)` may answer for an element without its
+/// probe rays (origins and directions, as cast) being cast: an edit's element that stayed,
+/// whose probes nothing that moved can reach.
+pub(crate) fn enclosed_elements_keeping(
+    mesh: &Mesh,
+    vis: &dyn Visibility,
+    seed: u64,
+    kept: &(dyn Fn(usize, &Probes) -> Option<bool> + Sync),
+) -> Vec<bool> {
     use rayon::prelude::*;
-    const PROBES: u32 = 16;
     (0..mesh.element_count())
         .into_par_iter()
         .map(|leaf| {
@@ -179,8 +196,9 @@ pub fn enclosed_elements(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<bo
             let (t, b) = crate::form_factors::basis(node.normal);
             let id = mesh.stable_id(mesh.leaves[leaf]);
             let mut rng = crate::rng::Rng::new(crate::rng::hash(seed ^ 0xDEAD, id, 0));
-            let mut back = 0;
-            for k in 0..PROBES {
+            let origin = crate::form_factors::ray_origin(node.centroid, node.normal);
+            let probes: Probes = std::array::from_fn(|k| {
+                let k = k as u32;
                 let (u1, u2) = (
                     (f64::from(k % 4) + rng.f64()) / 4.0,
                     (f64::from(k / 4) + rng.f64()) / 4.0,
@@ -189,21 +207,16 @@ pub fn enclosed_elements(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<bo
                 let dir = t * (r * phi.cos())
                     + b * (r * phi.sin())
                     + node.normal * (1.0 - u1).max(0.0).sqrt();
-                if vis
-                    .closest_hit(
-                        crate::form_factors::ray_origin(node.centroid, node.normal),
-                        dir.as_vec3(),
-                        f32::INFINITY,
-                    )
-                    .is_some_and(|h| !h.front)
-                {
-                    back += 1;
-                } else {
-                    // One probe that escapes or meets a front face decides it: not enclosed.
-                    break;
-                }
+                (origin, dir.as_vec3())
+            });
+            if let Some(enclosed) = kept(leaf, &probes) {
+                return enclosed;
             }
-            back == PROBES
+            // One probe that escapes or meets a front face decides it: not enclosed.
+            probes.iter().all(|&(o, d)| {
+                vis.closest_hit(o, d, f32::INFINITY)
+                    .is_some_and(|h| !h.front)
+            })
         })
         .collect()
 }

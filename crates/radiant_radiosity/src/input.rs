@@ -107,6 +107,45 @@ pub struct Lighting {
     pub textures: Option<ElementTextures>,
     /// Per element: irradiance from the lights and the sky ([`direct_irradiance`]).
     pub direct: Option<Vec<Rgb>>,
+    /// What the footprints were read from: the scene's images, and per input triangle a hash
+    /// of its texture coordinates and its surface's textures (empty without textures).
+    sources: TextureSources,
+}
+
+/// See [`Lighting`]'s `sources`.
+#[derive(Clone, Debug, Default)]
+struct TextureSources {
+    images: Vec<radiant_scene::texture::Image>,
+    keys: Vec<u64>,
+}
+
+impl TextureSources {
+    fn new(scene: &Scene) -> TextureSources {
+        if !scene.surfaces.iter().any(textured) {
+            return TextureSources::default();
+        }
+        let surface: Vec<u64> = (scene.surfaces.iter())
+            .map(|s| {
+                let mut h = crate::rng::Fnv::new();
+                h.bytes(format!("{:?}|{:?}", s.base_color_texture, s.emissive_texture).as_bytes());
+                h.0
+            })
+            .collect();
+        let keys = (scene.triangles.par_iter())
+            .map(|t| {
+                let mut h = crate::rng::Fnv(surface.get(t.surface as usize).copied().unwrap_or(0));
+                for uv in t.uv.iter().flatten() {
+                    h.bytes(&uv.x.to_bits().to_le_bytes());
+                    h.bytes(&uv.y.to_bits().to_le_bytes());
+                }
+                h.0
+            })
+            .collect();
+        TextureSources {
+            images: scene.images.clone(),
+            keys,
+        }
+    }
 }
 
 impl Lighting {
@@ -122,7 +161,52 @@ impl Lighting {
             lights: scene.lights.clone(),
             sky: scene.sky.clone(),
             masks,
+            sources: TextureSources::new(scene),
             textures: element_textures(scene, mesh),
+            direct: direct_irradiance(&scene.lights, scene.sky.as_ref(), mesh, bvh, params),
+        }
+    }
+
+    /// Whether `scene`'s textures would give the same footprints as this lighting's: the same
+    /// images, and every input triangle's texture coordinates and surface's textures.
+    pub(crate) fn same_textures(&self, scene: &Scene) -> bool {
+        let now = TextureSources::new(scene);
+        now.keys == self.sources.keys && now.images == self.sources.images
+    }
+
+    /// The lighting of an edited scene, as [`Lighting::new`] makes it: the texture footprints
+    /// of elements that stayed (`old_of_new_leaf`, against `old`'s mesh), on input triangles
+    /// whose texture coordinates and surface's textures are the same, over the same images,
+    /// are `old`'s, not read again.
+    pub(crate) fn edited(
+        scene: &Scene,
+        (mesh, old_of_new_leaf): (&Mesh, &[u32]),
+        bvh: &Bvh,
+        masks: Option<Arc<AlphaMasks>>,
+        params: &FormFactorParams,
+        (old, old_mesh): (&Lighting, &Mesh),
+    ) -> Lighting {
+        let sources = TextureSources::new(scene);
+        let kept = |leaf: usize| -> Option<(Rgb, Rgb)> {
+            let t = old.textures.as_ref()?;
+            let o = *old_of_new_leaf.get(leaf)? as usize;
+            let root = mesh.leaf_node(leaf as u32).root as usize;
+            let old_root = old_mesh.nodes[*old_mesh.leaves.get(o)? as usize].root as usize;
+            let same = sources.keys.get(root)? == old.sources.keys.get(old_root)?;
+            same.then(|| Some((*t.reflectance.get(o)?, *t.emission.get(o)?)))
+                .flatten()
+        };
+        let textures = if old.sources.images == scene.images {
+            element_textures_keeping(scene, mesh, &kept)
+        } else {
+            element_textures(scene, mesh)
+        };
+        Lighting {
+            lights: scene.lights.clone(),
+            sky: scene.sky.clone(),
+            masks,
+            sources,
+            textures,
             direct: direct_irradiance(&scene.lights, scene.sky.as_ref(), mesh, bvh, params),
         }
     }
@@ -151,6 +235,7 @@ impl Lighting {
             sky: sky.cloned(),
             masks: self.masks.clone(),
             textures: self.textures.clone(),
+            sources: self.sources.clone(),
             direct: direct.flatten(),
         }
     }
@@ -198,13 +283,44 @@ pub struct ElementTextures {
 /// The footprints of `scene`'s textures on `mesh`'s elements, or `None` when no surface has a
 /// texture (nothing to compute).
 pub fn element_textures(scene: &Scene, mesh: &Mesh) -> Option<ElementTextures> {
-    let textured = |s: &Surface| s.base_color_texture.is_some() || s.emissive_texture.is_some();
+    element_textures_keeping(scene, mesh, &|_| None)
+}
+
+/// Whether a surface has a texture whose footprints an element takes.
+fn textured(s: &Surface) -> bool {
+    s.base_color_texture.is_some() || s.emissive_texture.is_some()
+}
+
+/// [`element_textures`], where `kept(element)` may give an element's footprints (reflectance,
+/// emission) without reading them: only the images that the others read are filtered.
+fn element_textures_keeping(
+    scene: &Scene,
+    mesh: &Mesh,
+    kept: &(dyn Fn(usize) -> Option<(Rgb, Rgb)> + Sync),
+) -> Option<ElementTextures> {
     if !scene.surfaces.iter().any(textured) || mesh.roots.len() != scene.triangles.len() {
         return None;
     }
-    // One pyramid per image a texture reads, built in parallel.
+    let surface_of = |leaf: usize| {
+        let root = mesh.leaf_node(leaf as u32).root as usize;
+        let tri = scene.triangles.get(root)?;
+        Some((tri, scene.surfaces.get(tri.surface as usize)?))
+    };
+    let kept: Vec<Option<(Rgb, Rgb)>> = (0..mesh.element_count())
+        .into_par_iter()
+        .with_min_len(1024)
+        .map(kept)
+        .collect();
+    // One pyramid per image a texture of an element not kept reads, built in parallel.
     let mut used = vec![false; scene.images.len()];
-    for s in &scene.surfaces {
+    let mut seen = vec![false; scene.surfaces.len()];
+    for (leaf, k) in kept.iter().enumerate() {
+        let Some((tri, s)) = surface_of(leaf).filter(|_| k.is_none()) else {
+            continue;
+        };
+        if std::mem::replace(&mut seen[tri.surface as usize], true) {
+            continue;
+        }
         for t in [s.base_color_texture, s.emissive_texture]
             .into_iter()
             .flatten()
@@ -245,6 +361,10 @@ pub fn element_textures(scene: &Scene, mesh: &Mesh) -> Option<ElementTextures> {
         .enumerate()
         .with_min_len(256)
         .for_each(|(leaf, (rho, emit))| {
+            if let Some((r, e)) = kept[leaf] {
+                (*rho, *emit) = (r, e);
+                return;
+            }
             let node = mesh.leaf_node(leaf as u32);
             let root = node.root as usize;
             let (Some(tri), Some(&root_node)) = (scene.triangles.get(root), mesh.roots.get(root))

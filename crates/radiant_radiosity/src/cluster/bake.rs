@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use radiant_scene::{Light, Scene, Sky, Surface};
 use radiant_visibility::Visibility;
 
-use super::edit::{Before, New, Old};
+use super::edit::{Before, Moved, New, Old};
 use super::record::Record;
 use super::refine::RefineStats;
 use super::solve::{HierSystem, LINK_BYTES, Sweeping};
@@ -102,6 +102,25 @@ pub struct GeometryEdit {
     pub nodes: usize,
     /// Seconds the edit took, the solve not included.
     pub seconds: f64,
+    /// Where they went.
+    pub phases: EditPhases,
+}
+
+/// Seconds of a geometry edit's phases.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EditPhases {
+    /// The edited scene meshed and its nodes matched to the old ones.
+    pub meshing: f64,
+    /// Its BVH and cluster tree.
+    pub visibility: f64,
+    /// Direct light, sources and enclosed elements.
+    pub direct_light: f64,
+    /// The old refinement's nodes matched and what changed bounded.
+    pub matching: f64,
+    /// The refinement, copied where nothing changed.
+    pub refinement: f64,
+    /// The solver's rows.
+    pub rows: f64,
 }
 
 /// The fingerprint of what clustered links depend on: the per-triangle bake's, and the
@@ -439,6 +458,11 @@ impl ClusterBake {
         self.sys.rows()
     }
 
+    /// Per element: inside closed geometry (it receives nothing and is seen by nothing).
+    pub fn enclosed(&self) -> &[bool] {
+        &self.sys.dead
+    }
+
     /// Changes the surfaces' reflectance and emission and continues from the current
     /// solution: the links are kept (they do not depend on colour; refinement used the old
     /// estimates, as the per-triangle bake's edits do). Returns [`BakeError::NeedsRebuild`]
@@ -508,6 +532,13 @@ impl ClusterBake {
         stop: Option<&AtomicBool>,
     ) -> Result<GeometryEdit, BakeError> {
         let started = Instant::now();
+        let mut phases = EditPhases::default();
+        let mut t = Instant::now();
+        let mut lap = || {
+            std::mem::replace(&mut t, Instant::now())
+                .elapsed()
+                .as_secs_f64()
+        };
         let scene = input::static_scene(scene);
         let scene = scene.as_ref();
         input::validate(scene)?;
@@ -523,23 +554,51 @@ impl ClusterBake {
         }
         reserve_buffers(&mesh, &mut budget)?;
         let matched = RootMatch::new(&self.mesh, &mesh);
-        if matched.unchanged() && scene.surfaces == self.surfaces {
+        if matched.unchanged()
+            && scene.surfaces == self.surfaces
+            && self.lighting.same_textures(scene)
+        {
             return Ok(GeometryEdit {
                 links: self.sys.links(),
                 ..GeometryEdit::default()
             });
         }
+        phases.meshing = lap();
         let masks = input::masks(scene);
         let bvh = input::visibility(&mesh, masks.as_ref());
         let tree = Tree::new(&mesh);
-        let lighting = Lighting::new(scene, &mesh, &bvh, masks, &self.params.ff);
+        phases.visibility = lap();
+        let lighting = Lighting::edited(
+            scene,
+            (&mesh, &matched.old_of_new_leaf),
+            &bvh,
+            masks,
+            &self.params.ff,
+            (&self.lighting, &self.mesh),
+        );
         let (rho, source) = lighting.terms(&scene.surfaces, &mesh);
         if !source.iter().flatten().any(|&v| v > 0.0) {
             // Lights that reach nothing: a fresh bake would say so and build no links.
             return Err(BakeError::NeedsRebuild);
         }
-        let dead = crate::hierarchy::enclosed_elements(&mesh, &bvh, self.params.ff.seed);
+        let moved = Moved::new(&matched.changed_triangles(&self.mesh, &mesh));
+        // An element that stayed keeps its answer unless one of its probes may meet what
+        // moved.
+        let old_dead = &self.sys.dead;
+        let dead = crate::hierarchy::enclosed_elements_keeping(
+            &mesh,
+            &bvh,
+            self.params.ff.seed,
+            &|leaf, probes| {
+                let o = *matched.old_of_new_leaf.get(leaf)?;
+                let clear = probes
+                    .iter()
+                    .all(|&(p, d)| !moved.ray_meets(p.as_dvec3(), d.as_dvec3()));
+                clear.then(|| old_dead.get(o as usize).copied()).flatten()
+            },
+        );
         let oracle = Oracle::new(&mesh, &tree, &rho, &source);
+        phases.direct_light = lap();
         let before = self.record.as_ref().map(|record| {
             Before::new(
                 Old {
@@ -557,9 +616,11 @@ impl ClusterBake {
                     rho: &oracle.rmax,
                 },
                 &matched,
+                &moved,
             )
         });
         let kept_nodes = before.as_ref().map_or(0, Before::kept_nodes);
+        phases.matching = lap();
         let mut warnings = scene.warnings();
         let inputs = (&mesh, &tree, &bvh as &dyn Visibility, &oracle);
         let (record, eps, stats) = refine_within_budget(
@@ -573,7 +634,9 @@ impl ClusterBake {
             before.as_ref(),
         )?;
         drop(before);
+        phases.refinement = lap();
         let sys = HierSystem::new(&mesh, &tree, &record.links, rho, source, dead)?;
+        phases.rows = lap();
         // The current light, carried to the elements that stayed; the others start from their
         // sources.
         let mut b = matched.carry(&self.b);
@@ -600,6 +663,19 @@ impl ClusterBake {
         let s = &mut self.sweeps;
         (s.rule, s.since_start, s.stalled) = (Sweeping::default(), 0, None);
         s.info.converged = false;
+        tracing::info!(
+            computed = stats.computed,
+            kept = stats.kept,
+            links = self.sys.links(),
+            seconds = started.elapsed().as_secs_f64(),
+            meshing = phases.meshing,
+            visibility = phases.visibility,
+            direct_light = phases.direct_light,
+            matching = phases.matching,
+            refinement = phases.refinement,
+            rows = phases.rows,
+            "clustered bake: geometry edit"
+        );
         Ok(GeometryEdit {
             computed: stats.computed,
             kept: stats.kept,
@@ -607,6 +683,7 @@ impl ClusterBake {
             kept_nodes,
             nodes,
             seconds: started.elapsed().as_secs_f64(),
+            phases,
         })
     }
 

@@ -8,9 +8,15 @@
 //! only). It is *settled* when its estimates and every estimate below it are the old ones too:
 //! then refinement decides below it exactly as before. A pair of settled nodes whose shaft
 //! (the capsule around both bounding spheres) meets nothing that moved keeps everything the old
-//! refinement made of it, bit for bit, so the edit copies it from the [`Record`].
+//! refinement made of it, bit for bit, so the edit copies it from the [`Record`]. A link of old
+//! nodes with as many samples keeps its form factor when its shaft is clear, or else when
+//! none of its own segments (drawn again, not cast) meets what moved ([`Moved`]); the same
+//! holds for an element's enclosure probes.
 
-use glam::DVec3;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use glam::{DVec3, Vec3};
+use radiant_visibility::{Hit, Visibility};
 
 use super::record::{Op, Pos, Record};
 use super::refine::{Cursor, Link};
@@ -48,10 +54,54 @@ pub(crate) struct Before<'a> {
     new_of_old: Vec<u32>,
     /// Per new node: an old node whose estimates, and all below it, are the old ones.
     settled: Vec<bool>,
-    /// Bounding spheres (local frame) of the triangles that came and went.
-    changed: Vec<(DVec3, f64)>,
-    /// A sphere around all of them.
-    all_changed: (DVec3, f64),
+    /// Where the triangles that came and went lie.
+    moved: &'a Moved,
+}
+
+/// Where the triangles that came and went in an edit lie (local frame): at most [`SPHERES`]
+/// bounding spheres, and one around them all. What no segment or ray can reach through them is
+/// what the edit left as it was.
+pub(crate) struct Moved {
+    spheres: Vec<(DVec3, f64)>,
+    all: (DVec3, f64),
+}
+
+impl Moved {
+    /// Around `triangles` (those that came, and those that went).
+    pub fn new(triangles: &[[DVec3; 3]]) -> Moved {
+        let spheres = spheres(triangles);
+        let all = around(&spheres);
+        Moved { spheres, all }
+    }
+
+    /// Whether nothing that moved comes within `wide` (and [`MARGIN`]) of the segment `a b`.
+    pub fn clear_of(&self, a: DVec3, b: DVec3, wide: f64) -> bool {
+        let ab = b - a;
+        let len2 = ab.length_squared();
+        let clear = |&(c, radius): &(DVec3, f64)| {
+            let t = if len2 > 0.0 {
+                ((c - a).dot(ab) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            (a + ab * t).distance(c) > wide + radius + MARGIN
+        };
+        clear(&self.all) || self.spheres.iter().all(clear)
+    }
+
+    /// Whether the ray from `o` along `d` (to any distance) may meet what moved.
+    pub fn ray_meets(&self, o: DVec3, d: DVec3) -> bool {
+        let len2 = d.length_squared();
+        let near = |&(c, radius): &(DVec3, f64)| {
+            let t = if len2 > 0.0 {
+                ((c - o).dot(d) / len2).max(0.0)
+            } else {
+                0.0
+            };
+            (o + d * t).distance(c) <= radius + MARGIN
+        };
+        near(&self.all) && self.spheres.iter().any(near)
+    }
 }
 
 /// The old bake's parts an edit needs.
@@ -74,7 +124,7 @@ pub(crate) struct New<'a> {
 
 impl<'a> Before<'a> {
     /// Matches the edited scene's nodes against the old ones.
-    pub fn new(old: Old<'a>, new: New<'_>, matched: &RootMatch) -> Before<'a> {
+    pub fn new(old: Old<'a>, new: New<'_>, matched: &RootMatch, moved: &'a Moved) -> Before<'a> {
         let nm = new.tree.mesh_nodes as usize;
         let mut old_of_new = vec![NONE; new.tree.len()];
         let mut new_of_old = vec![NONE; old.tree.len()];
@@ -122,8 +172,6 @@ impl<'a> Before<'a> {
             let [a, b] = new.tree.clusters[c].children;
             settled[n] = same(n) && settled[a as usize] && settled[b as usize];
         }
-        let changed = spheres(&matched.changed_triangles(old.mesh, new.mesh));
-        let all_changed = around(&changed);
         Before {
             tree: old.tree,
             mesh: old.mesh,
@@ -134,8 +182,7 @@ impl<'a> Before<'a> {
             old_of_new,
             new_of_old,
             settled,
-            changed,
-            all_changed,
+            moved,
         }
     }
 
@@ -186,17 +233,16 @@ impl<'a> Before<'a> {
     pub fn clear_of_changes(&self, tree: &Tree, r: u32, s: u32) -> bool {
         let (a, b) = (tree.center[r as usize], tree.center[s as usize]);
         let wide = tree.radius[r as usize].max(tree.radius[s as usize]);
-        let ab = b - a;
-        let len2 = ab.length_squared();
-        let clear = |&(c, radius): &(DVec3, f64)| {
-            let t = if len2 > 0.0 {
-                ((c - a).dot(ab) / len2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            (a + ab * t).distance(c) > wide + radius + MARGIN
-        };
-        clear(&self.all_changed) || self.changed.iter().all(clear)
+        self.moved.clear_of(a, b, wide)
+    }
+
+    /// A visibility that casts no ray but notes whether a segment asked of it may meet what
+    /// moved (comes within [`MARGIN`] of the spheres around the triangles that came and went).
+    pub fn segments(&self) -> Changes<'_> {
+        Changes {
+            before: self,
+            met: AtomicBool::new(false),
+        }
     }
 
     /// An old link in the new numbering (both its nodes are old ones).
@@ -353,6 +399,35 @@ impl<'a> Before<'a> {
     /// New nodes that are old ones.
     pub fn kept_nodes(&self) -> usize {
         self.old_of_new.iter().filter(|&&o| o != NONE).count()
+    }
+}
+
+/// See [`Before::segments`].
+pub(crate) struct Changes<'a> {
+    before: &'a Before<'a>,
+    met: AtomicBool,
+}
+
+impl Changes<'_> {
+    /// Whether a segment asked of it may meet what moved.
+    pub fn met(&self) -> bool {
+        self.met.load(Ordering::Relaxed)
+    }
+}
+
+impl Visibility for Changes<'_> {
+    fn segment_clear(&self, a: Vec3, b: Vec3) -> bool {
+        if !self.before.moved.clear_of(a.as_dvec3(), b.as_dvec3(), 0.0) {
+            self.met.store(true, Ordering::Relaxed);
+        }
+        // Either answer: the form factor drawn with it is not kept.
+        true
+    }
+
+    fn closest_hit(&self, _origin: Vec3, _dir: Vec3, _tmax: f32) -> Option<Hit> {
+        // Not asked by a form factor; never let it pass for clear.
+        self.met.store(true, Ordering::Relaxed);
+        None
     }
 }
 

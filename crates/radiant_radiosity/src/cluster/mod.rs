@@ -38,7 +38,7 @@ pub mod sh;
 pub mod solve;
 pub mod tree;
 
-pub use bake::{ClusterBake, GeometryEdit};
+pub use bake::{ClusterBake, EditPhases, GeometryEdit};
 pub use refine::RefineStats;
 
 use std::sync::atomic::{AtomicBool, Ordering};

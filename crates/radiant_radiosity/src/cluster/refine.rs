@@ -410,15 +410,23 @@ impl Refiner<'_> {
             return None;
         };
         let op = b.record.op(pos);
-        if !matches!(op, Op::Link | Op::Zero)
-            || !b.same_pair(r, s, cur)
-            || !b.clear_of_changes(self.tree, r, s)
-        {
+        if !matches!(op, Op::Link | Op::Zero) || !b.same_pair(r, s, cur) {
             return None;
         }
         let old = carry_err(b.mesh, b.tree, b.rho, b.bhat, ro, so) / b.eps;
         if self.samples_for(err) != self.samples_for(old) {
             return None;
+        }
+        // The same nodes and samples: the same point pairs, so the form factor is the old one
+        // unless one of its segments may meet what moved. The shaft around both nodes says so
+        // at once; where it does not, the link's own segments are drawn again (the rays are
+        // not cast) and each is held against what moved.
+        if !b.clear_of_changes(self.tree, r, s) {
+            let changes = b.segments();
+            self.form_factor_with(&changes, r, s, err);
+            if changes.met() {
+                return None;
+            }
         }
         Some(match op {
             Op::Link => b.record.link(pos).ff,
@@ -584,13 +592,18 @@ impl Refiner<'_> {
 
     /// The form factor of `r ← s`, visibility included.
     fn form_factor(&self, r: u32, s: u32, err: f64) -> f64 {
+        self.form_factor_with(self.vis, r, s, err)
+    }
+
+    /// [`Refiner::form_factor`] with the segments asked of `vis`.
+    fn form_factor_with(&self, vis: &dyn Visibility, r: u32, s: u32, err: f64) -> f64 {
         // Samples by what the link may carry: one where it is far below the threshold, the
         // full count near it, `ABOVE` times that on links above it that could not be split.
         let n = self.samples_for(err);
         let mut rng = Rng::new(hash(self.seed, self.stable_id(r), self.stable_id(s)));
         let m = self.tree.mesh_nodes;
         if r < m && s < m {
-            return self.planar(r, s, n, &mut rng);
+            return self.planar(vis, r, s, n, &mut rng);
         }
         // A cluster link's estimate is its form factor too, not only its visibility: never
         // fewer than half the full count, unless it carries so little that one would do for
@@ -614,7 +627,7 @@ impl Refiner<'_> {
             if cr <= 0.0 || cs <= 0.0 || d2 <= 0.0 {
                 continue;
             }
-            if self.vis.segment_clear(x.as_vec3(), p.as_vec3()) {
+            if vis.segment_clear(x.as_vec3(), p.as_vec3()) {
                 // The disc form (Wallace et al.) keeps a near pair from dominating.
                 sum += (cr * cs / d2) / (PI * d2 + da);
             }
@@ -643,7 +656,7 @@ impl Refiner<'_> {
     }
 
     /// Two triangles: the unoccluded form factor times the clear fraction of `n` segments.
-    fn planar(&self, r: u32, s: u32, n: u32, rng: &mut Rng) -> f64 {
+    fn planar(&self, vis: &dyn Visibility, r: u32, s: u32, n: u32, rng: &mut Rng) -> f64 {
         let (nr, ns) = (&self.mesh.nodes[r as usize], &self.mesh.nodes[s as usize]);
         let f0 = match self.kind {
             FormFactorKind::RayCast => {
@@ -690,15 +703,13 @@ impl Refiner<'_> {
                 continue;
             }
             valid += w;
-            if self.vis.segment_clear(x.as_vec3(), p.as_vec3()) {
+            if vis.segment_clear(x.as_vec3(), p.as_vec3()) {
                 clear += w;
             }
         }
         if valid == 0.0 {
             // Every pair grazes: judge by the centroids.
-            let clear = self
-                .vis
-                .segment_clear(nr.centroid.as_vec3(), ns.centroid.as_vec3());
+            let clear = vis.segment_clear(nr.centroid.as_vec3(), ns.centroid.as_vec3());
             return if clear { f0 } else { 0.0 };
         }
         f0 * clear / valid

@@ -53,7 +53,7 @@ pub struct HierSystem {
     /// Element source term (emission plus direct light).
     pub source: Vec<Rgb>,
     /// Elements inside closed geometry.
-    dead: Vec<bool>,
+    pub(crate) dead: Vec<bool>,
     /// Centre of every node (directions between clusters).
     center: Vec<DVec3>,
     /// Mesh: unit normal of every node.
