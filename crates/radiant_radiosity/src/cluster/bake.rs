@@ -635,7 +635,8 @@ impl ClusterBake {
         )?;
         drop(before);
         phases.refinement = lap();
-        let sys = HierSystem::new(&mesh, &tree, &record.links, rho, source, dead)?;
+        let terms = (rho, source, dead);
+        let sys = HierSystem::new_in(&mesh, &tree, &record.links, terms, Some(&mut self.sys))?;
         phases.rows = lap();
         // The current light, carried to the elements that stayed; the others start from their
         // sources.

@@ -332,15 +332,26 @@ impl<'a> Before<'a> {
             return from;
         }
         let (ax, ay) = (self.ancestors(x), self.ancestors(y));
-        // The child of `a` on the way down to the node whose ancestors are `anc`.
-        let toward = |a: u32, anc: &[u32]| -> Option<usize> {
-            let (c, n) = self.old_children(a);
-            c[..n].iter().position(|ch| anc.contains(ch))
-        };
+        // Where `a` and `b` stand on the ways up from `x` and `y`.
         let root = self.tree.root(self.mesh);
         let (mut a, mut b, mut pos) = match from {
             Cursor::Near { pos, r, s } => (r, s, pos),
             _ => (root, root, Pos::default()),
+        };
+        let (Some(mut ia), Some(mut ib)) = (
+            ax.iter().rposition(|&n| n == a),
+            ay.iter().rposition(|&n| n == b),
+        ) else {
+            return Cursor::Unknown;
+        };
+        // The child of `a` (at `ia` on the way up `anc`) on the way down: its place among
+        // `a`'s children.
+        let toward = |a: u32, ia: &mut usize, anc: &[u32]| -> Option<usize> {
+            let next = *anc.get(ia.checked_sub(1)?)?;
+            let (c, n) = self.old_children(a);
+            let k = c[..n].iter().position(|&ch| ch == next)?;
+            *ia -= 1;
+            Some(k)
         };
         loop {
             if a == x && b == y {
@@ -355,7 +366,8 @@ impl<'a> Before<'a> {
                 Op::SplitRecv if a == x => return Cursor::Near { pos, r: a, s: b },
                 Op::SplitSrc if b == y => return Cursor::Near { pos, r: a, s: b },
                 Op::SplitSelf => {
-                    let (Some(i), Some(j)) = (toward(a, &ax), toward(b, &ay)) else {
+                    let (Some(i), Some(j)) = (toward(a, &mut ia, &ax), toward(b, &mut ib, &ay))
+                    else {
                         return Cursor::Unknown;
                     };
                     let (c, _) = self.old_children(a);
@@ -363,14 +375,14 @@ impl<'a> Before<'a> {
                     2 * i + j
                 }
                 Op::SplitRecv => {
-                    let Some(i) = toward(a, &ax) else {
+                    let Some(i) = toward(a, &mut ia, &ax) else {
                         return Cursor::Unknown;
                     };
                     a = self.old_children(a).0[i];
                     i
                 }
                 Op::SplitSrc => {
-                    let Some(j) = toward(b, &ay) else {
+                    let Some(j) = toward(b, &mut ib, &ay) else {
                         return Cursor::Unknown;
                     };
                     b = self.old_children(b).0[j];

@@ -65,7 +65,8 @@ impl Op {
 }
 
 /// The size of a subtree: its pairs, links and sized subtrees, itself included.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, bytemuck::Zeroable)]
+#[repr(C)]
 pub struct Extent {
     /// Pairs (bytes of [`Record::ops`]).
     pub ops: u64,
@@ -73,6 +74,28 @@ pub struct Extent {
     pub links: u64,
     /// Entries of [`Record::sized`].
     pub sized: u64,
+}
+
+impl std::ops::Add for Extent {
+    type Output = Extent;
+    fn add(self, o: Extent) -> Extent {
+        Extent {
+            ops: self.ops + o.ops,
+            links: self.links + o.links,
+            sized: self.sized + o.sized,
+        }
+    }
+}
+
+impl std::ops::Sub for Extent {
+    type Output = Extent;
+    fn sub(self, o: Extent) -> Extent {
+        Extent {
+            ops: self.ops - o.ops,
+            links: self.links - o.links,
+            sized: self.sized - o.sized,
+        }
+    }
 }
 
 /// A place in a record: the pair whose op is at `ops`, the links and sized entries before it.
@@ -217,10 +240,16 @@ impl Record {
 
     /// Closes the split opened at `start`, once its children's subtrees follow it.
     pub fn close_split(&mut self, start: Pos) {
+        self.close_split_holding(start, Extent::default());
+    }
+
+    /// [`Record::close_split`] for a split whose subtree also holds `held` that is not written
+    /// here yet (a [`Piece`]'s stretches of another record).
+    fn close_split_holding(&mut self, start: Pos, held: Extent) {
         if self.links_only {
             return;
         }
-        let e = start.to(self.end());
+        let e = start.to(self.end()) + held;
         if e.ops >= SIZED_AT {
             self.ops[start.ops as usize] |= SIZED;
             self.sized[start.sized as usize] = e;
@@ -231,24 +260,246 @@ impl Record {
         }
     }
 
-    /// Appends the subtree `[from, to)` of `other`, its links mapped by `map`.
-    pub fn copy_from(&mut self, other: &Record, from: Pos, to: Pos, map: impl Fn(Link) -> Link) {
-        let (o, l, s) = (
-            (from.ops as usize, to.ops as usize),
-            (from.links as usize, to.links as usize),
-            (from.sized as usize, to.sized as usize),
-        );
-        self.ops.extend_from_slice(&other.ops[o.0..o.1]);
-        self.links
-            .extend(other.links[l.0..l.1].iter().map(|&k| map(k)));
-        self.sized.extend_from_slice(&other.sized[s.0..s.1]);
-    }
-
     /// Appends another record (a later part of the same refinement).
     pub fn append(&mut self, mut other: Record) {
         self.ops.append(&mut other.ops);
         self.links.append(&mut other.links);
         self.sized.append(&mut other.sized);
+    }
+
+    /// The record of a refinement made in parts: `top`, depth first, holds the splits above
+    /// the parts and where each of `pieces` goes; the stretches the pieces hold of `old` (an
+    /// edit's record before it) are copied in with their links mapped by `remap`. Every part is
+    /// written once, in parallel, into memory the allocator hands over zeroed and untouched
+    /// (so the kernel's zeroing of fresh pages is spread over the threads too). `None` when
+    /// the memory cannot be had.
+    pub fn assemble(
+        top: &[Top],
+        pieces: &[Piece],
+        links_only: bool,
+        old: Option<(&Record, &(dyn Fn(Link) -> Link + Sync))>,
+    ) -> Option<Record> {
+        use rayon::prelude::*;
+        let kept = |e: Extent| {
+            if links_only {
+                Extent {
+                    links: e.links,
+                    ..Extent::default()
+                }
+            } else {
+                e
+            }
+        };
+        // The extents of the top's splits, and whether each is sized.
+        let mut split_extent = vec![(Extent::default(), false); top.len()];
+        let mut open: Vec<(usize, Extent)> = Vec::new();
+        let mut sum = Extent::default();
+        for (i, t) in top.iter().enumerate() {
+            match *t {
+                Top::Open(..) => {
+                    open.push((i, sum));
+                    sum = Extent::default();
+                }
+                Top::Piece(p) => sum = sum + kept(pieces[p].extent()),
+                Top::Close => {
+                    let (at, outer) = open.pop()?;
+                    let mut e = sum
+                        + kept(Extent {
+                            ops: 1,
+                            links: 0,
+                            sized: 1,
+                        });
+                    let sized = e.ops >= SIZED_AT && !links_only;
+                    if !sized {
+                        e.sized -= u64::from(!links_only);
+                    }
+                    split_extent[at] = (e, sized);
+                    sum = outer + e;
+                }
+            }
+        }
+        // Each part's place, in order: a split's own entry, or a piece with its stretches.
+        enum Job<'p> {
+            Split(u8, Option<Extent>),
+            Piece(&'p Piece),
+        }
+        let mut jobs: Vec<(Job<'_>, Extent)> = Vec::with_capacity(top.len());
+        for (i, t) in top.iter().enumerate() {
+            match *t {
+                Top::Open(op, n) => {
+                    let (e, sized) = split_extent[i];
+                    let code =
+                        op.code() | if n == 4 { FOUR } else { 0 } | if sized { SIZED } else { 0 };
+                    let size = Extent {
+                        ops: 1,
+                        links: 0,
+                        sized: u64::from(sized),
+                    };
+                    if !links_only {
+                        jobs.push((Job::Split(code, sized.then_some(e)), size));
+                    }
+                }
+                Top::Piece(p) => jobs.push((Job::Piece(&pieces[p]), kept(pieces[p].extent()))),
+                Top::Close => {}
+            }
+        }
+        let total = jobs.iter().fold(Extent::default(), |a, j| a + j.1);
+        let mut out = Record {
+            ops: bytemuck::allocation::try_zeroed_vec(total.ops as usize).ok()?,
+            links: bytemuck::allocation::try_zeroed_vec(total.links as usize).ok()?,
+            sized: bytemuck::allocation::try_zeroed_vec(total.sized as usize).ok()?,
+            links_only,
+        };
+        // Disjoint places for the parts, then every part written at once.
+        type Place<'o> = (&'o mut [u8], &'o mut [Link], &'o mut [Extent]);
+        fn take<'o>(place: &mut Place<'o>, e: Extent) -> Place<'o> {
+            let (a, o) = std::mem::take(&mut place.0).split_at_mut(e.ops as usize);
+            let (b, l) = std::mem::take(&mut place.1).split_at_mut(e.links as usize);
+            let (c, z) = std::mem::take(&mut place.2).split_at_mut(e.sized as usize);
+            *place = (o, l, z);
+            (a, b, c)
+        }
+        let mut rest: Place<'_> = (&mut out.ops[..], &mut out.links[..], &mut out.sized[..]);
+        let mut work = Vec::with_capacity(jobs.len());
+        for (job, e) in jobs {
+            work.push((job, take(&mut rest, e)));
+        }
+        // Copies `[from, to)` of `rec` to the front of `place`, its links mapped by `map`.
+        let copy = |place: &mut Place<'_>,
+                    rec: &Record,
+                    from: Pos,
+                    to: Pos,
+                    map: Option<&dyn Fn(Link) -> Link>| {
+            let (o, l, z) = take(place, kept(from.to(to)));
+            if !links_only {
+                o.copy_from_slice(&rec.ops[from.ops as usize..to.ops as usize]);
+                z.copy_from_slice(&rec.sized[from.sized as usize..to.sized as usize]);
+            }
+            let src = &rec.links[from.links as usize..to.links as usize];
+            match map {
+                Some(m) => l.iter_mut().zip(src).for_each(|(d, s)| *d = m(*s)),
+                None => l.copy_from_slice(src),
+            }
+        };
+        let missing = std::sync::atomic::AtomicBool::new(false);
+        work.into_par_iter()
+            .with_max_len(1)
+            .for_each(|(job, mut place)| match job {
+                Job::Split(code, e) => {
+                    place.0[0] = code;
+                    if let Some(e) = e {
+                        place.2[0] = e;
+                    }
+                }
+                Job::Piece(piece) => {
+                    let mut at = Pos::default();
+                    for h in &piece.holes {
+                        copy(&mut place, &piece.own, at, h.at, None);
+                        let Some((rec, remap)) = old else {
+                            missing.store(true, std::sync::atomic::Ordering::Relaxed);
+                            return;
+                        };
+                        copy(&mut place, rec, h.from, h.to, Some(remap));
+                        at = h.at;
+                    }
+                    copy(&mut place, &piece.own, at, piece.own.end(), None);
+                }
+            });
+        (!missing.into_inner()).then_some(out)
+    }
+}
+
+/// The top of a refinement made in parts, depth first ([`Record::assemble`]).
+#[derive(Clone, Copy, Debug)]
+pub enum Top {
+    /// A split into this many children, whose entries follow up to its [`Top::Close`].
+    Open(Op, usize),
+    /// The piece of this number.
+    Piece(usize),
+    /// The end of the last open split.
+    Close,
+}
+
+/// A part of a refinement made on its own: its own ops, links and sizes, and stretches of
+/// another record (an edit's record before it) that go in between, copied only when the parts
+/// are put together ([`Record::assemble`]), so that what an edit keeps is copied once.
+#[derive(Debug, Default)]
+pub struct Piece {
+    /// What this part made itself.
+    pub own: Record,
+    /// Stretches of the other record, in order.
+    holes: Vec<Hole>,
+    /// Their extents, summed.
+    held: Extent,
+}
+
+/// A stretch `[from, to)` of another record that goes where `own` is at `at`.
+#[derive(Clone, Copy, Debug)]
+struct Hole {
+    at: Pos,
+    from: Pos,
+    to: Pos,
+}
+
+/// Where a [`Piece`]'s split was opened.
+#[derive(Clone, Copy, Debug)]
+pub struct Opened {
+    own: Pos,
+    held: Extent,
+    holes: usize,
+}
+
+impl Piece {
+    /// A piece writing into `own` (whole, or links alone).
+    pub fn new(own: Record) -> Piece {
+        Piece {
+            own,
+            holes: Vec::new(),
+            held: Extent::default(),
+        }
+    }
+
+    /// Its size with the stretches it holds.
+    pub fn extent(&self) -> Extent {
+        Pos::default().to(self.own.end()) + self.held
+    }
+
+    /// As [`Record::push`].
+    pub fn push(&mut self, op: Op, link: Option<Link>) {
+        self.own.push(op, link);
+    }
+
+    /// As [`Record::open_split`].
+    pub fn open_split(&mut self, op: Op, children: usize) -> Opened {
+        Opened {
+            own: self.own.open_split(op, children),
+            held: self.held,
+            holes: self.holes.len(),
+        }
+    }
+
+    /// As [`Record::close_split`].
+    pub fn close_split(&mut self, start: Opened) {
+        let sized = self.own.sized.len();
+        self.own
+            .close_split_holding(start.own, self.held - start.held);
+        if self.own.sized.len() < sized {
+            // The split stayed small: the size held for it went, and the stretches below it
+            // (themselves small, nothing sized in them) move up one sized entry.
+            for h in &mut self.holes[start.holes..] {
+                h.at.sized -= 1;
+            }
+        }
+    }
+
+    /// The subtree `[from, to)` of the other record goes here.
+    pub fn copy_from(&mut self, from: Pos, to: Pos) {
+        self.holes.push(Hole {
+            at: self.own.end(),
+            from,
+            to,
+        });
+        self.held = self.held + from.to(to);
     }
 }
 
@@ -313,5 +564,93 @@ mod tests {
             p = big.skip(p);
         }
         assert_eq!(big.skip(p), big.end());
+    }
+
+    /// A small subtree (a split of two) and a sized one (a chain of 300 splits), their links'
+    /// receivers offset by `k`.
+    fn small(rec: &mut Record, k: u32) {
+        let s = rec.open_split(Op::SplitRecv, 2);
+        rec.push(Op::Link, Some(link(1 + k)));
+        rec.push(Op::Cull, None);
+        rec.close_split(s);
+    }
+
+    fn large(rec: &mut Record, k: u32) {
+        let mut chain = Vec::new();
+        for i in 0..300 {
+            chain.push(rec.open_split(Op::SplitRecv, 2));
+            rec.push(Op::Link, Some(link(i + k)));
+        }
+        rec.push(Op::Zero, None);
+        for s in chain.into_iter().rev() {
+            rec.close_split(s);
+        }
+    }
+
+    #[test]
+    fn pieces_with_stretches_of_another_record_assemble_as_if_written_in_one() {
+        let mut old = Record::default();
+        small(&mut old, 0);
+        large(&mut old, 0);
+        let a = (Pos::default(), old.skip(Pos::default()));
+        let b = (a.1, old.skip(a.1));
+        assert_eq!(b.1, old.end());
+        let remap = |l: Link| Link {
+            recv: l.recv + 100,
+            ..l
+        };
+        for links_only in [false, true] {
+            let blank = || {
+                if links_only {
+                    Record::links_only()
+                } else {
+                    Record::default()
+                }
+            };
+            // Written in one.
+            let mut want = blank();
+            let top = want.open_split(Op::SplitSelf, 4);
+            let s = want.open_split(Op::SplitSrc, 2);
+            small(&mut want, 100);
+            want.push(Op::Link, Some(link(5)));
+            want.close_split(s);
+            large(&mut want, 100);
+            want.push(Op::Zero, None);
+            small(&mut want, 100);
+            large(&mut want, 100);
+            let s = want.open_split(Op::SplitRecv, 2);
+            small(&mut want, 100);
+            want.push(Op::Cull, None);
+            want.close_split(s);
+            want.close_split(top);
+
+            // The same in four pieces under a split, the old subtrees held, not copied: in a
+            // small split (whose held size goes), alone, two in a row, and first in a split.
+            let mut p = [(); 4].map(|_| Piece::new(blank()));
+            let s = p[0].open_split(Op::SplitSrc, 2);
+            p[0].copy_from(a.0, a.1);
+            p[0].push(Op::Link, Some(link(5)));
+            p[0].close_split(s);
+            p[1].copy_from(b.0, b.1);
+            p[2].push(Op::Zero, None);
+            p[2].copy_from(a.0, a.1);
+            p[2].copy_from(b.0, b.1);
+            let s = p[3].open_split(Op::SplitRecv, 2);
+            p[3].copy_from(a.0, a.1);
+            p[3].push(Op::Cull, None);
+            p[3].close_split(s);
+            let parts = [
+                Top::Open(Op::SplitSelf, 4),
+                Top::Piece(0),
+                Top::Piece(1),
+                Top::Piece(2),
+                Top::Piece(3),
+                Top::Close,
+            ];
+            let got = Record::assemble(&parts, &p, links_only, Some((&old, &remap)));
+            assert_eq!(got.as_ref(), Some(&want), "links only: {links_only}");
+            // Without the other record, nothing is made up for its stretches.
+            assert!(Record::assemble(&parts, &p, links_only, None).is_none());
+        }
     }
 }

@@ -19,14 +19,14 @@ use radiant_visibility::Visibility;
 use rayon::prelude::*;
 
 use super::edit::Before;
-use super::record::{Op, Pos, Record};
+use super::record::{Op, Piece, Pos, Record, Top as Part};
 use super::tree::Tree;
 use crate::form_factors::{FormFactorKind, analytic::point_to_triangle, sample_triangle};
 use crate::mesh::Mesh;
 use crate::rng::{Rng, hash};
 
 /// One link: `recv` gathers `ff × B̄(src)`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Zeroable)]
 pub struct Link {
     /// Receiver node.
     pub recv: u32,
@@ -222,10 +222,10 @@ impl Refiner<'_> {
         let done = AtomicUsize::new(0);
         let total = work.len();
         let chunk = (total / (rayon::current_num_threads() * 16)).clamp(1, 64);
-        let chunks: Vec<Vec<Record>> = work
+        let chunks: Vec<Vec<Piece>> = work
             .par_chunks(chunk)
             .map(|items| {
-                let out: Vec<Record> = items
+                let out: Vec<Piece> = items
                     .iter()
                     .map(|w| {
                         let mut rec = self.empty();
@@ -240,27 +240,17 @@ impl Refiner<'_> {
                 out
             })
             .collect();
-        let mut pieces: Vec<Record> = chunks.into_iter().flatten().collect();
+        let pieces: Vec<Piece> = chunks.into_iter().flatten().collect();
         if shared.abort.load(Ordering::Relaxed) {
             return None;
         }
-        let mut record = self.empty();
-        // Everything at once, so the record is not grown (and copied) piece by piece.
-        let splits = levels
-            .iter()
-            .flatten()
-            .filter(|t| matches!(t, Top::Split(..)))
-            .count();
-        record
-            .ops
-            .reserve_exact(splits + pieces.iter().map(|p| p.ops.len()).sum::<usize>());
-        record
-            .links
-            .reserve_exact(pieces.iter().map(|p| p.links.len()).sum());
-        record
-            .sized
-            .reserve_exact(splits + pieces.iter().map(|p| p.sized.len()).sum::<usize>());
-        assemble(&levels, 0, 0, &mut pieces, &mut record);
+        let mut top = Vec::with_capacity(levels.iter().map(Vec::len).sum::<usize>() * 2);
+        depth_first(&levels, 0, 0, &mut top);
+        let remap = |l: Link| self.before.map_or(l, |b| b.remap(l));
+        let old = self
+            .before
+            .map(|b| (b.record, &remap as &(dyn Fn(Link) -> Link + Sync)));
+        let record = Record::assemble(&top, &pieces, !self.keep, old)?;
         let stats = RefineStats {
             computed: shared.computed.load(Ordering::Relaxed),
             kept: shared.kept.load(Ordering::Relaxed),
@@ -268,17 +258,17 @@ impl Refiner<'_> {
         Some((record, stats))
     }
 
-    /// An empty record: whole, or the links alone.
-    fn empty(&self) -> Record {
-        if self.keep {
+    /// An empty piece: whole, or the links alone.
+    fn empty(&self) -> Piece {
+        Piece::new(if self.keep {
             Record::default()
         } else {
             Record::links_only()
-        }
+        })
     }
 
     /// One piece of work into `out`.
-    fn run(&self, w: &Work, out: &mut Record, shared: &Shared) {
+    fn run(&self, w: &Work, out: &mut Piece, shared: &Shared) {
         match *w {
             Work::Refine(r, s, cur) => {
                 let mut since = 0;
@@ -309,7 +299,7 @@ impl Refiner<'_> {
         r: u32,
         s: u32,
         cur: Cursor,
-        out: &mut Record,
+        out: &mut Piece,
         shared: &Shared,
         since: &mut u64,
     ) -> bool {
@@ -333,11 +323,13 @@ impl Refiner<'_> {
     }
 
     /// Records a visit that is not a split.
-    fn emit(&self, r: u32, s: u32, v: &Visit, out: &mut Record, shared: &Shared, since: &mut u64) {
+    fn emit(&self, r: u32, s: u32, v: &Visit, out: &mut Piece, shared: &Shared, since: &mut u64) {
         match *v {
             Visit::Copy(from, to) => {
-                let Some(b) = self.before else { return };
-                out.copy_from(b.record, from, to, |l| b.remap(l));
+                if self.before.is_none() {
+                    return;
+                }
+                out.copy_from(from, to);
                 let links = to.links - from.links;
                 shared.kept.fetch_add(links, Ordering::Relaxed);
                 *since += links;
@@ -758,16 +750,16 @@ enum Top {
     Work(usize),
 }
 
-/// Writes the top's entry `i` of level `l` and what lies below it into `out`, depth first.
-fn assemble(levels: &[Vec<Top>], l: usize, i: usize, pieces: &mut [Record], out: &mut Record) {
+/// The top's entry `i` of level `l` and what lies below it, depth first, into `out`.
+fn depth_first(levels: &[Vec<Top>], l: usize, i: usize, out: &mut Vec<Part>) {
     match levels[l][i] {
         Top::Split(op, first, n) => {
-            let start = out.open_split(op, n);
+            out.push(Part::Open(op, n));
             for k in 0..n {
-                assemble(levels, l + 1, first + k, pieces, out);
+                depth_first(levels, l + 1, first + k, out);
             }
-            out.close_split(start);
+            out.push(Part::Close);
         }
-        Top::Work(w) => out.append(std::mem::take(&mut pieces[w])),
+        Top::Work(w) => out.push(Part::Piece(w)),
     }
 }
