@@ -1,12 +1,13 @@
 //! The in-editor case, headless: the Cornell box bakes in the background of a bevy_ecs world,
 //! then a wall's colour is edited, the block is moved and then removed; each rebake's error timeline is
 //! printed, measured against the converged answer, with the main schedule's cost per frame.
-//! Given a glTF level instead, it bakes the level (clustered) and moves one prop.
+//! Given a glTF scene instead, it bakes it with the clustered hierarchy and moves one prop.
 //!
 //! `cargo run --release --example live_rebake [PATCH_SIZE]`
-//! `cargo run --release --example live_rebake SCENE.gltf [PREFIX [DX]]`: the surfaces whose names
-//! start with PREFIX moved by DX scene units along x (for Sponza,
-//! `../shared/scenes/sponza/Sponza_sun.gltf VaseRound.003 0.2`: a vase moved 20 cm).
+//! `cargo run --release --example live_rebake SCENE.gltf [PREFIX [DX [REFINEMENT]]]`: the
+//! surfaces whose names start with PREFIX moved by DX scene units along x (for Sponza,
+//! `../shared/scenes/sponza/Sponza_sun.gltf VaseRound.003 0.2`: a vase moved 20 cm; for the
+//! box baked clustered, `assets/cornell_box.gltf short_block 0.05 0.008`).
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -93,10 +94,18 @@ fn main() -> anyhow::Result<()> {
 fn level(path: &str, args: &[String]) -> anyhow::Result<()> {
     let prefix = args.first().map_or("VaseRound.003", String::as_str);
     let dx: f64 = args.get(1).map_or(Ok(0.2), |v| v.parse())?;
+    let mut params = BakeParams::default();
+    if let Some(r) = args.get(2) {
+        params.links.refinement = r.parse()?;
+    }
     let scene = radiant::scene::load_gltf(std::path::Path::new(path))?;
     let mut app = App::new();
     app.add_plugins(RadiantPlugins)
-        .insert_resource(RadiosityBake::default());
+        .insert_resource(RadiosityBake {
+            params,
+            hierarchy: radiant::radiosity::cluster::Hierarchy::Clustered,
+            ..RadiosityBake::default()
+        });
     spawn_scene(&mut app.world, &scene);
     let t0 = Instant::now();
     let (snaps, mut frames) = run(&mut app, t0);

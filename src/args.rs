@@ -120,6 +120,16 @@ pub(crate) enum Hierarchy {
     Triangles,
 }
 
+impl From<Hierarchy> for radiant::radiosity::cluster::Hierarchy {
+    fn from(h: Hierarchy) -> Self {
+        match h {
+            Hierarchy::Auto => Self::Auto,
+            Hierarchy::Clustered => Self::Clustered,
+            Hierarchy::Triangles => Self::Triangles,
+        }
+    }
+}
+
 /// `converge --reference`: what the error is measured against.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) enum Reference {

@@ -45,6 +45,8 @@ pub(crate) struct ViewArgs {
     #[arg(long, value_parser = crate::args::parse_texel_density)]
     pub(crate) texel_density: Option<f64>,
     #[command(flatten)]
+    pub(crate) hierarchy: crate::HierarchyArgs,
+    #[command(flatten)]
     pub(crate) solve: SolveArgs,
 }
 
@@ -90,10 +92,18 @@ pub(crate) fn run(args: &ViewArgs) -> anyhow::Result<()> {
     options.inspector = !args.no_inspector;
     options.exit_after_frames = args.frames;
     options.texel_density = args.texel_density;
+    let h = &args.hierarchy;
     options.bake = radiant::ecs::bake::RadiosityBake {
         params,
         checkpoint: Some(args.checkpoint.clone()),
         threads: args.solve.threads,
+        hierarchy: h.hierarchy.into(),
+        // The viewer edits: the refinement's record is kept (ClusterParams::edits).
+        cluster: radiant::radiosity::cluster::ClusterParams {
+            memory_limit: h.memory_limit,
+            samples: h.link_samples,
+            ..Default::default()
+        },
         ..Default::default()
     };
     let report = radiant_viewer::run(options)?;

@@ -583,6 +583,53 @@ fn a_level_bakes_clustered_in_the_world_pauses_and_keeps_its_links_through_edits
 }
 
 #[test]
+fn the_plain_box_bakes_clustered_when_asked_and_a_moved_block_refines_only_what_it_touches() {
+    // The box is no level, but an editor that moves its geometry may ask for the clustered
+    // hierarchy: its links follow the move in place.
+    let mut app = App::new();
+    app.add_plugins(RadiantPlugins)
+        .insert_resource(RadiosityBake {
+            params: params(),
+            hierarchy: radiant_radiosity::cluster::Hierarchy::Clustered,
+            ..RadiosityBake::default()
+        });
+    let box_ = radiant_scene::builtin("cornell-box").expect("builtin");
+    assert!(!radiant_radiosity::cluster::suits(&box_, &params()).expect("count"));
+    spawn_scene(&mut app.world, &box_);
+    converge(&mut app);
+    let want = clustered(&gather_scene(&mut app.world));
+    let status = app.world.resource::<BakeStatus>().clone();
+    assert_eq!(status.size.links, want.report.links, "{status:?}");
+    assert_eq!(
+        *app.world.resource::<BakedLighting>().radiosity,
+        want.radiosity
+    );
+    let mut q = app.world.query::<(&Name, &mut Transform)>();
+    for (n, mut t) in q.iter_mut(&mut app.world) {
+        if n.as_str().starts_with("short_block") {
+            t.translation.x += 0.05;
+        }
+    }
+    app.update();
+    converge(&mut app);
+    let moved = app.world.resource::<BakeStatus>().clone();
+    assert_eq!(
+        (moved.counts.builds, moved.counts.geometry_edits),
+        (1, 1),
+        "{moved:?}"
+    );
+    let want = clustered(&gather_scene(&mut app.world));
+    assert_eq!(moved.size.links, want.report.links);
+    let fresh_ff = want.report.clusters.as_ref().map_or(0, |c| c.form_factors);
+    assert!(
+        moved.counts.links_recomputed > 0 && (moved.counts.links_recomputed as u64) < fresh_ff,
+        "{} of {fresh_ff}",
+        moved.counts.links_recomputed
+    );
+    assert_surfaces_close(&app, &want, 1e-3);
+}
+
+#[test]
 fn a_level_resumes_from_its_clustered_checkpoint_after_a_restart() {
     let dir = std::env::temp_dir().join(format!("radiant-ecs-level-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("dir");

@@ -14,7 +14,8 @@
 //!   materials, lights and the sky, and moved, added or removed static geometry
 //!   (`Bake::edit_geometry`, which recomputes only the links the change touches); a change of
 //!   the static scene's bounding box bakes again;
-//! - a level (`radiant_radiosity::cluster::suits`) bakes clustered
+//! - a level (`radiant_radiosity::cluster::suits`), or any scene when
+//!   [`RadiosityBake::hierarchy`] asks for it, bakes clustered
 //!   (`radiant_radiosity::cluster::ClusterBake`): materials, lights and the sky keep its
 //!   links, and a geometry edit refines only what it touches (`ClusterBake::edit_geometry`);
 //!   one that arrives while the level's links are being built stops the build, which starts
@@ -32,7 +33,7 @@ use std::time::Duration;
 
 use bevy_ecs::prelude::*;
 use bevy_tasks::{AsyncComputeTaskPool, Task, TaskPoolBuilder, futures::check_ready};
-use radiant_radiosity::cluster::ClusterParams;
+use radiant_radiosity::cluster::{ClusterParams, Hierarchy};
 use radiant_radiosity::metrics::SurfaceMean;
 use radiant_radiosity::smooth::SmoothField;
 use radiant_radiosity::{BakeError, BakeParams, Mesh, Rgb, SolveError};
@@ -62,6 +63,10 @@ pub struct RadiosityBake {
     /// factors (or refining a level's links), and it is rewritten (atomically) after each
     /// build, on convergence and on pause (default: none).
     pub checkpoint: Option<std::path::PathBuf>,
+    /// Which link hierarchy bakes (default: `Auto`, the clustered one for a level). An editor
+    /// that moves geometry of a small scene often may ask for `Clustered`: its geometry edits
+    /// cost what they touch at any size.
+    pub hierarchy: Hierarchy,
 }
 
 impl Default for RadiosityBake {
@@ -72,6 +77,7 @@ impl Default for RadiosityBake {
             publish_interval: Duration::from_millis(100),
             threads: None,
             checkpoint: None,
+            hierarchy: Hierarchy::Auto,
         }
     }
 }
@@ -442,6 +448,7 @@ impl BakeWorker {
             cluster: settings.cluster,
             publish_interval: settings.publish_interval,
             checkpoint: settings.checkpoint.clone(),
+            hierarchy: settings.hierarchy,
             epoch: self.epoch,
             cancelled: cancelled.clone(),
         };

@@ -118,6 +118,7 @@ pub(super) struct Setup {
     pub cluster: ClusterParams,
     pub publish_interval: Duration,
     pub checkpoint: Option<std::path::PathBuf>,
+    pub hierarchy: cluster::Hierarchy,
     pub epoch: u64,
     /// Set when the world drops this worker: it then stops and writes no checkpoint (a newer
     /// bake may).
@@ -191,7 +192,7 @@ impl Engine {
         inbox: &Inbox,
         tx: &mpsc::Sender<Report>,
     ) -> Result<Engine, BakeError> {
-        let level = cluster::suits(scene, &setup.params)?;
+        let level = setup.hierarchy.clustered(scene, &setup.params)?;
         if let Some(path) = setup.checkpoint.as_deref().filter(|p| p.exists()) {
             let resumed = if level {
                 ClusterBake::resume(scene, &setup.params, &setup.cluster, path)

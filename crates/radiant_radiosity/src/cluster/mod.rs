@@ -220,6 +220,30 @@ pub fn suits(scene: &Scene, params: &BakeParams) -> Result<bool, BakeError> {
     Ok(supported && is_level(scene, params)?)
 }
 
+/// Which link hierarchy bakes a scene (the CLI's `--hierarchy`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Hierarchy {
+    /// The clustered hierarchy for a level ([`suits`]), else the per-triangle one.
+    #[default]
+    Auto,
+    /// Volume clusters above the triangles, links at any level on both ends; a solver or
+    /// form-factor method it does not support is a typed error when the bake is built.
+    Clustered,
+    /// Every element gathers from a per-triangle hierarchy.
+    Triangles,
+}
+
+impl Hierarchy {
+    /// Whether `scene` bakes with the clustered hierarchy.
+    pub fn clustered(self, scene: &Scene, params: &BakeParams) -> Result<bool, BakeError> {
+        match self {
+            Hierarchy::Auto => suits(scene, params),
+            Hierarchy::Clustered => Ok(true),
+            Hierarchy::Triangles => Ok(false),
+        }
+    }
+}
+
 /// The size half of [`suits`]: more than 4096 triangles, or more than 65 536 elements in the
 /// per-triangle mesh.
 pub fn is_level(scene: &Scene, params: &BakeParams) -> Result<bool, BakeError> {
