@@ -4,7 +4,8 @@
 //!
 //! `cargo run --release -p radiant_radiosity --example level_edit -- SCENE.gltf PREFIX DX DY DZ
 //! [REFINEMENT]` (default: `../shared/scenes/sponza/Sponza_sun.gltf VaseRound.003 0.2 0 0`, a
-//! vase moved 20 cm, at the default refinement).
+//! vase moved 20 cm, at the default refinement). `LEVEL_EDIT_CHECKPOINT=FILE` resumes from FILE
+//! (written by the first such run) instead of baking.
 
 use std::time::Instant;
 
@@ -53,7 +54,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     params.links.refinement = num(5, params.links.refinement);
     let cp = ClusterParams::default();
     let t = Instant::now();
-    let mut bake = ClusterBake::new(&scene, &params, &cp, &|_, _, _| {}, None)?;
+    // With LEVEL_EDIT_CHECKPOINT=FILE: resumed from FILE when it fits (the edit then makes
+    // the refinement again first), else baked and written there.
+    let checkpoint = std::env::var_os("LEVEL_EDIT_CHECKPOINT").map(std::path::PathBuf::from);
+    let mut bake = match checkpoint.as_deref().filter(|c| c.exists()) {
+        Some(c) => ClusterBake::resume(&scene, &params, &cp, c)?,
+        None => {
+            let b = ClusterBake::new(&scene, &params, &cp, &|_, _, _| {}, None)?;
+            if let Some(c) = &checkpoint {
+                b.write_checkpoint(c)?;
+            }
+            b
+        }
+    };
     println!(
         "built in {:.2} s: {} links",
         t.elapsed().as_secs_f64(),
@@ -71,8 +84,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     let p = e.phases;
     println!(
-        "  meshing {:.3} s, BVH and tree {:.3} s, direct light {:.3} s, matching {:.3} s, refinement {:.3} s, rows {:.3} s",
-        p.meshing, p.visibility, p.direct_light, p.matching, p.refinement, p.rows
+        "  replay {:.3} s, meshing {:.3} s, BVH and tree {:.3} s, direct light {:.3} s, matching {:.3} s, refinement {:.3} s, rows {:.3} s",
+        p.replay, p.meshing, p.visibility, p.direct_light, p.matching, p.refinement, p.rows
     );
     println!("the edit returned after {edited:.3} s");
     if std::env::var_os("LEVEL_EDIT_QUIT").is_some() {

@@ -405,6 +405,54 @@ fn a_geometry_edit_keeps_what_stayed_of_textures_and_enclosure_bit_for_bit() {
     same_terms(b, fresh(&shifted, &p));
 }
 
+#[test]
+fn a_resumed_bake_makes_its_refinement_again_for_its_first_geometry_edit() {
+    // A checkpoint holds the links, not the refinement's record: the first geometry edit after
+    // a resume makes the refinement again with the links' form factors (none computed), then
+    // refines only what the edit touches, to a fresh bake's links.
+    let scene = radiant_radiosity::scenes::tessellated(
+        &radiant_scene::builtin("cornell-box").expect("builtin"),
+        1,
+    );
+    let p = params();
+    let path = temp("replay");
+    fresh(&scene, &p).write_checkpoint(&path).expect("writes");
+    let moved = radiant_radiosity::scenes::translated(
+        &scene,
+        "short_block",
+        glam::DVec3::new(0.05, 0.0, 0.0),
+    );
+    let cp = ClusterParams::default();
+    let mut r = ClusterBake::resume(&scene, &p, &cp, &path).expect("resumes");
+    let e = r.edit_geometry(&moved, &|_, _, _| {}, None).expect("edits");
+    let f = fresh(&moved, &p);
+    assert!(same_links(&r, &f));
+    let all = f.report().clusters.map_or(0, |c| c.form_factors);
+    assert!(
+        e.kept > 0 && e.computed < all / 2,
+        "{} of {all}",
+        e.computed
+    );
+    assert!(e.phases.replay > 0.0);
+
+    // Resumed under other materials, the refinement made again is not the one that made the
+    // links: the edit refines everything, to a fresh bake's links all the same.
+    let mut other = scene.clone();
+    for s in other.surfaces.iter_mut().filter(|s| s.emission == [0.0; 3]) {
+        s.reflectance = s.reflectance.map(|c| 0.3 * c);
+    }
+    let moved = radiant_radiosity::scenes::translated(
+        &other,
+        "short_block",
+        glam::DVec3::new(0.05, 0.0, 0.0),
+    );
+    let mut r = ClusterBake::resume(&other, &p, &cp, &path).expect("resumes");
+    let e = r.edit_geometry(&moved, &|_, _, _| {}, None).expect("edits");
+    assert_eq!(e.kept, 0);
+    assert!(same_links(&r, &fresh(&moved, &p)));
+    let _ = std::fs::remove_file(&path);
+}
+
 fn gone_name(scene: &Scene, surface: u32) -> &str {
     &scene.surfaces[surface as usize].name
 }

@@ -117,10 +117,25 @@ pub struct EditPhases {
     pub direct_light: f64,
     /// The old refinement's nodes matched and what changed bounded.
     pub matching: f64,
+    /// A resumed bake's refinement made again for its record, before its first edit.
+    pub replay: f64,
     /// The refinement, copied where nothing changed.
     pub refinement: f64,
     /// The solver's rows.
     pub rows: f64,
+}
+
+/// A visibility for a refinement that casts no ray ([`refine::Replay`]): never asked.
+struct NoRays;
+
+impl Visibility for NoRays {
+    fn segment_clear(&self, _: glam::Vec3, _: glam::Vec3) -> bool {
+        false
+    }
+
+    fn closest_hit(&self, _: glam::Vec3, _: glam::Vec3, _: f32) -> Option<radiant_visibility::Hit> {
+        None
+    }
 }
 
 /// The fingerprint of what clustered links depend on: the per-triangle bake's, and the
@@ -564,6 +579,10 @@ impl ClusterBake {
             });
         }
         phases.meshing = lap();
+        if self.record.is_none() && self.cp.edits {
+            self.record = self.replayed_record();
+            phases.replay = lap();
+        }
         let masks = input::masks(scene);
         let bvh = input::visibility(&mesh, masks.as_ref());
         let tree = Tree::new(&mesh);
@@ -686,6 +705,52 @@ impl ClusterBake {
             seconds: started.elapsed().as_secs_f64(),
             phases,
         })
+    }
+
+    /// The record of the refinement that made the links of a bake resumed from a checkpoint
+    /// (which holds the links, not the record): the refinement made again from the
+    /// checkpoint's threshold, its form factors taken from the links instead of computed.
+    /// `None` (and a note in the log) when that refinement does not meet every link, as when
+    /// the materials changed between the bake and the resume, or over the memory budget:
+    /// the edit then refines everything.
+    fn replayed_record(&mut self) -> Option<Record> {
+        if !self.has_emitters {
+            return None;
+        }
+        let t = Instant::now();
+        let rows = self.sys.rows();
+        let replay = refine::Replay::new(rows.row, rows.src, rows.ff);
+        let r = refine::Refiner {
+            mesh: &self.mesh,
+            tree: &self.tree,
+            vis: &NoRays,
+            bhat: &self.oracle.bhat,
+            rho: &self.oracle.rmax,
+            eps: self.refinement_used,
+            kind: self.params.form_factors,
+            samples: self.cp.samples,
+            seed: self.params.ff.seed,
+            max_links: u64::MAX,
+            stop: None,
+            before: None,
+            keep: true,
+            replay: Some(&replay),
+        };
+        let (record, _) = r.build(&|_, _| {})?;
+        let same = replay.all_met() && record.links.len() == rows.src.len();
+        let fits = (self.budget)
+            .reserve(
+                "the refinement's record",
+                record.bytes() - record.links.len() as u64 * 12,
+            )
+            .is_ok();
+        tracing::info!(
+            same,
+            fits,
+            seconds = t.elapsed().as_secs_f64(),
+            "clustered bake: the resumed refinement made again for a geometry edit"
+        );
+        (same && fits).then_some(record)
     }
 
     /// The links solved again in `bands` wavelength bands with spectral materials (by
@@ -852,6 +917,7 @@ fn refine_within_budget(
             stop,
             before: before.filter(|b| b.eps == eps),
             keep: cp.edits,
+            replay: None,
         };
         let t = Instant::now();
         if let Some((record, stats)) = r.build(&|d, n| progress(Phase::Links, d, n)) {

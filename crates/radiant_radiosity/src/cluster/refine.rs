@@ -125,6 +125,59 @@ pub(crate) struct Refiner<'a> {
     pub before: Option<&'a Before<'a>>,
     /// Keep the whole record (for geometry edits), not the links alone.
     pub keep: bool,
+    /// Take the form factors from these links instead of computing them (a resumed bake's
+    /// refinement made again, for its record).
+    pub replay: Option<&'a Replay>,
+}
+
+/// A bake's links by receiver, each row sorted by source, for [`Refiner::replay`]: a link the
+/// refinement makes takes its form factor from here, and one not here was wholly hidden.
+pub(crate) struct Replay {
+    row: Vec<u64>,
+    links: Vec<(u32, f32)>,
+    found: AtomicU64,
+}
+
+impl Replay {
+    /// From rows by receiver node.
+    pub fn new(row: &[u64], src: &[u32], ff: &[f32]) -> Replay {
+        let mut links: Vec<(u32, f32)> = src.iter().copied().zip(ff.iter().copied()).collect();
+        let mut rows = Vec::with_capacity(row.len());
+        let mut rest = &mut links[..];
+        for w in row.windows(2) {
+            let (a, b) = std::mem::take(&mut rest).split_at_mut((w[1] - w[0]) as usize);
+            rows.push(a);
+            rest = b;
+        }
+        rows.into_par_iter()
+            .for_each(|r| r.sort_unstable_by_key(|&(s, _)| s));
+        Replay {
+            row: row.to_vec(),
+            links,
+            found: AtomicU64::new(0),
+        }
+    }
+
+    /// The form factor of `r ← s`, 0 when it is not a link.
+    fn get(&self, r: u32, s: u32) -> f32 {
+        let (Some(&a), Some(&b)) = (self.row.get(r as usize), self.row.get(r as usize + 1)) else {
+            return 0.0;
+        };
+        let row = &self.links[a as usize..b as usize];
+        match row.binary_search_by_key(&s, |&(x, _)| x) {
+            Ok(k) => {
+                self.found.fetch_add(1, Ordering::Relaxed);
+                row[k].1
+            }
+            Err(_) => 0.0,
+        }
+    }
+
+    /// Whether every link was met (once each, as a refinement meets a pair): then the
+    /// refinement made again is the one that made them.
+    pub fn all_met(&self) -> bool {
+        self.found.load(Ordering::Relaxed) == self.links.len() as u64
+    }
 }
 
 /// How much of a refinement was computed, and how much kept from the one before an edit.
@@ -341,10 +394,13 @@ impl Refiner<'_> {
                         shared.kept.fetch_add(u64::from(f > 0.0), Ordering::Relaxed);
                         f
                     }
-                    None => {
-                        shared.computed.fetch_add(1, Ordering::Relaxed);
-                        self.form_factor(r, s, err) as f32
-                    }
+                    None => match self.replay {
+                        Some(links) => links.get(r, s),
+                        None => {
+                            shared.computed.fetch_add(1, Ordering::Relaxed);
+                            self.form_factor(r, s, err) as f32
+                        }
+                    },
                 };
                 if f > 0.0 {
                     out.push(
