@@ -7,7 +7,12 @@
 //! Version 3, little-endian: the magic and version; the fingerprint, element, node (mesh nodes
 //! and clusters) and link counts, and the refinement threshold the links were built with; row
 //! offsets (u64, one per node and one more), sources (u32), form factors (f32), enclosed flags
-//! (u8), radiosity (3 × f64 per element); an FNV-1a checksum.
+//! (u8), radiosity (3 × f64 per element); where the bake kept it for geometry edits, the
+//! refinement's record: a hash of the estimates it was refined with, its op and sized-subtree
+//! counts (u64), ops (u8), sized subtrees (3 × u64; its links are the rows' links, found again
+//! by walking the ops); an FNV-1a checksum. A
+//! file without the record (older, or from a one-shot bake) resumes all the same, and makes
+//! the refinement again at its first geometry edit.
 //!
 //! Layout (version 2), little-endian: 16-byte magic and version; the fingerprint of the
 //! geometry, lights and every parameter the links depend on; element, node, link and fully
@@ -23,6 +28,7 @@ use std::io::Write;
 use std::path::Path;
 
 use crate::BakeError;
+use crate::cluster::record::Extent;
 use crate::cluster::solve::{Rows, RowsRef};
 use crate::hierarchy::{Estimates, Hierarchy};
 use crate::links::Links;
@@ -382,20 +388,25 @@ pub struct SavedClustered {
     pub dead: Vec<bool>,
     /// Radiosity per element.
     pub radiosity: Vec<Rgb>,
+    /// The refinement's record, when the file holds it: the hash of the estimates it was
+    /// refined with, its ops and sized subtrees.
+    pub record: Option<(u64, Vec<u8>, Vec<Extent>)>,
 }
 
-/// Writes a clustered checkpoint atomically.
+/// Writes a clustered checkpoint atomically; `record`: the refinement's record (the hash of
+/// its estimates, its ops and sized subtrees), for geometry edits after a resume.
 pub fn write_clustered(
     path: &Path,
     fingerprint: u64,
     refinement: f64,
     rows: RowsRef,
-    dead: &[bool],
-    radiosity: &[Rgb],
+    (dead, radiosity): (&[bool], &[Rgb]),
+    record: Option<(u64, &[u8], &[Extent])>,
 ) -> Result<(), BakeError> {
     let (n, nodes, nl) = (radiosity.len(), rows.row.len() - 1, rows.src.len());
     let mut buf: Vec<u8> = Vec::new();
-    let size = 16 + 40 + (nodes + 1) * 8 + nl * 8 + n * 25 + 8;
+    let kept = record.map_or(0, |(_, o, z)| 24 + o.len() + z.len() * 24);
+    let size = 16 + 40 + (nodes + 1) * 8 + nl * 8 + n * 25 + kept + 8;
     buf.try_reserve_exact(size)
         .map_err(|_| BakeError::OutOfMemory {
             what: "the checkpoint's buffer",
@@ -427,6 +438,17 @@ pub fn write_clustered(
         .iter()
         .flatten()
         .for_each(|c| buf.extend_from_slice(&c.to_le_bytes()));
+    if let Some((hash, ops, sized)) = record {
+        buf.extend_from_slice(&hash.to_le_bytes());
+        buf.extend_from_slice(&(ops.len() as u64).to_le_bytes());
+        buf.extend_from_slice(&(sized.len() as u64).to_le_bytes());
+        buf.extend_from_slice(ops);
+        for e in sized {
+            for v in [e.ops, e.links, e.sized] {
+                buf.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+    }
     write_atomically(path, buf)
 }
 
@@ -442,7 +464,8 @@ pub fn read_clustered(path: &Path) -> Result<SavedClustered, BakeError> {
     let refinement = c.f64();
     let (n128, nodes128, nl128) = (u128::from(n), u128::from(nodes), u128::from(nl));
     let expected = 16 + 40 + (nodes128 + 1) * 8 + nl128 * 8 + n128 * 25;
-    if expected != body.len() as u128 {
+    let len = body.len() as u128;
+    if expected != len && expected + 24 > len {
         return Err(bad("sizes do not match the file length"));
     }
     let (n, nodes, nl) = (n as usize, nodes as usize, nl as usize);
@@ -451,6 +474,24 @@ pub fn read_clustered(path: &Path) -> Result<SavedClustered, BakeError> {
     let ff: Vec<f32> = (0..nl).map(|_| c.f32()).collect();
     let dead: Vec<bool> = (0..n).map(|_| c.take::<1>()[0] != 0).collect();
     let radiosity: Vec<Rgb> = (0..n).map(|_| [c.f64(), c.f64(), c.f64()]).collect();
+    let record = if expected == len {
+        None
+    } else {
+        let (hash, no, nz) = (c.u64(), c.u64(), c.u64());
+        if expected + 24 + u128::from(no) + u128::from(nz) * 24 != len {
+            return Err(bad("sizes do not match the file length"));
+        }
+        let ops = c.data[c.at..c.at + no as usize].to_vec();
+        c.at += no as usize;
+        let sized: Vec<Extent> = (0..nz)
+            .map(|_| Extent {
+                ops: c.u64(),
+                links: c.u64(),
+                sized: c.u64(),
+            })
+            .collect();
+        Some((hash, ops, sized))
+    };
     let header_ok = row.first() == Some(&0)
         && row.last() == Some(&(nl as u64))
         && row.windows(2).all(|w| w[0] <= w[1])
@@ -470,6 +511,7 @@ pub fn read_clustered(path: &Path) -> Result<SavedClustered, BakeError> {
         rows: Rows { row, src, ff },
         dead,
         radiosity,
+        record,
     })
 }
 

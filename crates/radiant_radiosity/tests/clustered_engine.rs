@@ -406,46 +406,67 @@ fn a_geometry_edit_keeps_what_stayed_of_textures_and_enclosure_bit_for_bit() {
 }
 
 #[test]
-fn a_resumed_bake_makes_its_refinement_again_for_its_first_geometry_edit() {
-    // A checkpoint holds the links, not the refinement's record: the first geometry edit after
-    // a resume makes the refinement again with the links' form factors (none computed), then
-    // refines only what the edit touches, to a fresh bake's links.
+fn a_resumed_bake_edits_from_its_checkpoints_record_or_makes_its_refinement_again() {
+    // A bake kept for geometry edits writes its refinement's record into its checkpoint; a
+    // one-shot bake's checkpoint holds the links alone, and the first geometry edit after its
+    // resume makes the refinement again with the links' form factors (none computed). Either
+    // way the edit refines only what it touches, to a fresh bake's links.
     let scene = radiant_radiosity::scenes::tessellated(
         &radiant_scene::builtin("cornell-box").expect("builtin"),
         1,
     );
     let p = params();
     let path = temp("replay");
-    fresh(&scene, &p).write_checkpoint(&path).expect("writes");
-    let moved = radiant_radiosity::scenes::translated(
-        &scene,
-        "short_block",
-        glam::DVec3::new(0.05, 0.0, 0.0),
-    );
+    let shift = |s: &Scene| {
+        radiant_radiosity::scenes::translated(s, "short_block", glam::DVec3::new(0.05, 0.0, 0.0))
+    };
+    let moved = shift(&scene);
     let cp = ClusterParams::default();
+    let f = fresh(&moved, &p);
+    let all = f.report().clusters.map_or(0, |c| c.form_factors);
+
+    let one_shot = ClusterParams {
+        edits: false,
+        ..ClusterParams::default()
+    };
+    let b = ClusterBake::new(&scene, &p, &one_shot, &|_, _, _| {}, None).expect("builds");
+    b.write_checkpoint(&path).expect("writes");
+    let small = std::fs::metadata(&path).expect("written").len();
     let mut r = ClusterBake::resume(&scene, &p, &cp, &path).expect("resumes");
     let e = r.edit_geometry(&moved, &|_, _, _| {}, None).expect("edits");
-    let f = fresh(&moved, &p);
     assert!(same_links(&r, &f));
-    let all = f.report().clusters.map_or(0, |c| c.form_factors);
     assert!(
         e.kept > 0 && e.computed < all / 2,
         "{} of {all}",
         e.computed
     );
     assert!(e.phases.replay > 0.0);
+    let first = e.computed;
 
-    // Resumed under other materials, the refinement made again is not the one that made the
-    // links: the edit refines everything, to a fresh bake's links all the same.
+    fresh(&scene, &p).write_checkpoint(&path).expect("writes");
+    assert!(std::fs::metadata(&path).expect("written").len() > small);
+    let mut r = ClusterBake::resume(&scene, &p, &cp, &path).expect("resumes");
+    let e = r.edit_geometry(&moved, &|_, _, _| {}, None).expect("edits");
+    assert!(same_links(&r, &f));
+    assert_eq!((e.computed, e.phases.replay), (first, 0.0));
+    // Written after that edit, the record is the edited refinement's: moved back after a
+    // resume, the links are the first scene's.
+    let edited = temp("replay-edited");
+    r.write_checkpoint(&edited).expect("writes");
+    let mut r = ClusterBake::resume(&moved, &p, &cp, &edited).expect("resumes");
+    let e = r.edit_geometry(&scene, &|_, _, _| {}, None).expect("edits");
+    assert!(e.kept > 0 && e.phases.replay == 0.0);
+    assert!(same_links(&r, &fresh(&scene, &p)));
+    let _ = std::fs::remove_file(&edited);
+
+    // Resumed under other materials, the record is not this bake's (its estimates differ),
+    // nor is the refinement made again: the edit refines everything, to a fresh bake's links
+    // all the same.
     let mut other = scene.clone();
     for s in other.surfaces.iter_mut().filter(|s| s.emission == [0.0; 3]) {
         s.reflectance = s.reflectance.map(|c| 0.3 * c);
     }
-    let moved = radiant_radiosity::scenes::translated(
-        &other,
-        "short_block",
-        glam::DVec3::new(0.05, 0.0, 0.0),
-    );
+    let moved = shift(&other);
     let mut r = ClusterBake::resume(&other, &p, &cp, &path).expect("resumes");
     let e = r.edit_geometry(&moved, &|_, _, _| {}, None).expect("edits");
     assert_eq!(e.kept, 0);

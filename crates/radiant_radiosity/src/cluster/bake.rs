@@ -125,6 +125,46 @@ pub struct EditPhases {
     pub rows: f64,
 }
 
+/// The record a checkpoint holds, its links found again in the checkpoint's rows: `None`
+/// (noted in the log) unless its links are the rows' links, each met once, or over `budget`.
+fn saved_record(
+    mesh: &Mesh,
+    tree: &Tree,
+    rows: &super::solve::Rows,
+    (ops, sized): (Vec<u8>, Vec<super::record::Extent>),
+    budget: &mut Budget,
+) -> Option<Record> {
+    let children = |id: u32| match tree.cluster(id) {
+        Some(c) => ([c.children[0], c.children[1], 0, 0], 2),
+        None => match mesh.nodes.get(id as usize).map(|n| n.first_child) {
+            Some(f) if f != crate::mesh::NO_CHILD => ([f, f + 1, f + 2, f + 3], 4),
+            _ => ([0; 4], 0),
+        },
+    };
+    let replay = refine::Replay::new(&rows.row, &rows.src, &rows.ff);
+    let rebuilt = Record::rebuilt(ops, sized, tree.root(mesh), children, |r, s| {
+        replay.get(r, s)
+    });
+    let whole = rebuilt
+        .as_ref()
+        .is_some_and(|r| r.links.len() == rows.src.len() && replay.all_met());
+    let fits = whole
+        && rebuilt.as_ref().is_some_and(|r| {
+            (budget.reserve(
+                "the refinement's record",
+                r.bytes() - r.links.len() as u64 * 12,
+            ))
+            .is_ok()
+        });
+    if !fits {
+        tracing::info!(
+            whole,
+            "clustered bake: the checkpoint's record is not kept; a geometry edit makes the refinement again"
+        );
+    }
+    rebuilt.filter(|_| fits)
+}
+
 /// A visibility for a refinement that casts no ray ([`refine::Replay`]): never asked.
 struct NoRays;
 
@@ -246,7 +286,7 @@ impl ClusterBake {
         let oracle = Oracle::new(&mesh, &tree, &rho, &source);
         let mut refined = RefineStats::default();
         let (sys, refinement_used, b, record) = match saved {
-            Some(sv) => {
+            Some(mut sv) => {
                 if sv.dead.len() != n || sv.nodes != tree.len() {
                     return Err(CheckpointError::OtherMesh {
                         elements: n,
@@ -261,8 +301,16 @@ impl ClusterBake {
                     return Err(CheckpointError::NoLinks.into());
                 }
                 budget.reserve("the links", sv.rows.src.len() as u64 * LINK_BYTES)?;
+                // Kept when refined with the estimates this resume has (not when the materials
+                // changed since), and its links are the checkpoint's.
+                let record = match sv.record.take() {
+                    Some((hash, ops, sized)) if cp.edits && hash == oracle.hash() => {
+                        saved_record(&mesh, &tree, &sv.rows, (ops, sized), &mut budget)
+                    }
+                    _ => None,
+                };
                 let sys = HierSystem::from_rows(&mesh, &tree, sv.rows, rho, source, sv.dead);
-                (sys, sv.refinement, Some(sv.radiosity), None)
+                (sys, sv.refinement, Some(sv.radiosity), record)
             }
             None if has_emitters => {
                 let dead = crate::hierarchy::enclosed_elements(&mesh, &bvh, params.ff.seed);
@@ -780,8 +828,8 @@ impl ClusterBake {
             self.fingerprint,
             self.refinement_used,
             self.sys.rows(),
-            self.sys.enclosed(),
-            &self.radiosity(),
+            (self.sys.enclosed(), &self.radiosity()),
+            (self.record.as_ref()).map(|r| (self.oracle.hash(), &r.ops[..], &r.sized[..])),
         )
     }
 
@@ -849,6 +897,16 @@ pub(crate) struct Oracle {
 }
 
 impl Oracle {
+    /// A hash of every estimate, bit for bit: a record refined with other estimates is not
+    /// this one's.
+    fn hash(&self) -> u64 {
+        let mut h = Fnv::new();
+        for v in self.bhat.iter().chain(&self.rmax) {
+            h.bytes(&v.to_bits().to_le_bytes());
+        }
+        h.0
+    }
+
     fn new(mesh: &Mesh, tree: &Tree, rho: &[Rgb], source: &[Rgb]) -> Oracle {
         let max3 = |v: &Rgb| v[0].max(v[1]).max(v[2]);
         let bmesh = crate::hierarchy::Estimates::new(mesh, rho, source, 1.0).bhat;

@@ -409,6 +409,64 @@ impl Record {
     }
 }
 
+impl Record {
+    /// A record from its ops and sizes (a checkpoint's), its links found by walking the pairs
+    /// from `root`'s self-link (`children(node)`: a node's children, none for an element) and
+    /// taking each link's form factor from `ff(r, s)`. `None` unless the ops make one whole
+    /// refinement whose sized subtrees are `sized`.
+    pub fn rebuilt(
+        ops: Vec<u8>,
+        sized: Vec<Extent>,
+        root: u32,
+        children: impl Fn(u32) -> ([u32; 4], usize),
+        ff: impl Fn(u32, u32) -> f32,
+    ) -> Option<Record> {
+        let mut links = Vec::new();
+        let mut stack = vec![(root, root)];
+        let mut n_sized = 0usize;
+        for &code in &ops {
+            let (r, s) = stack.pop()?;
+            n_sized += usize::from(code & SIZED != 0);
+            let op = Op::from_code(code);
+            let split = |n: u32, want: usize| {
+                let (c, k) = children(n);
+                (k == want || op == Op::SplitSelf).then_some((c, k))
+            };
+            let want = if code & FOUR != 0 { 4 } else { 2 };
+            match op {
+                Op::Link => links.push(Link {
+                    recv: r,
+                    src: s,
+                    ff: ff(r, s),
+                }),
+                Op::Cull | Op::Zero => {}
+                Op::SplitSelf => {
+                    let (c, k) = split(r, 2)?;
+                    if k != 2 || r != s {
+                        return None;
+                    }
+                    let (a, b) = (c[0], c[1]);
+                    stack.extend([(b, b), (b, a), (a, b), (a, a)]);
+                }
+                Op::SplitRecv => {
+                    let (c, k) = split(r, want)?;
+                    stack.extend(c[..k].iter().rev().map(|&x| (x, s)));
+                }
+                Op::SplitSrc => {
+                    let (c, k) = split(s, want)?;
+                    stack.extend(c[..k].iter().rev().map(|&x| (r, x)));
+                }
+            }
+        }
+        (stack.is_empty() && n_sized == sized.len()).then_some(Record {
+            ops,
+            links,
+            sized,
+            links_only: false,
+        })
+    }
+}
+
 /// The top of a refinement made in parts, depth first ([`Record::assemble`]).
 #[derive(Clone, Copy, Debug)]
 pub enum Top {

@@ -159,7 +159,7 @@ impl Replay {
     }
 
     /// The form factor of `r ← s`, 0 when it is not a link.
-    fn get(&self, r: u32, s: u32) -> f32 {
+    pub fn get(&self, r: u32, s: u32) -> f32 {
         let (Some(&a), Some(&b)) = (self.row.get(r as usize), self.row.get(r as usize + 1)) else {
             return 0.0;
         };
