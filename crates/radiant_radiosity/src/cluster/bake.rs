@@ -740,6 +740,7 @@ impl ClusterBake {
             visibility = phases.visibility,
             direct_light = phases.direct_light,
             matching = phases.matching,
+            replay = phases.replay,
             refinement = phases.refinement,
             rows = phases.rows,
             "clustered bake: geometry edit"
@@ -786,12 +787,13 @@ impl ClusterBake {
         };
         let (record, _) = r.build(&|_, _| {})?;
         let same = replay.all_met() && record.links.len() == rows.src.len();
-        let fits = (self.budget)
-            .reserve(
-                "the refinement's record",
-                record.bytes() - record.links.len() as u64 * 12,
-            )
-            .is_ok();
+        let fits = same
+            && (self.budget)
+                .reserve(
+                    "the refinement's record",
+                    record.bytes() - record.links.len() as u64 * 12,
+                )
+                .is_ok();
         tracing::info!(
             same,
             fits,
