@@ -321,7 +321,8 @@ impl Bake {
         let unchanged = matched.unchanged()
             && scene.lights == self.lighting.lights
             && scene.sky == self.lighting.sky
-            && scene.surfaces == self.surfaces;
+            && scene.surfaces == self.surfaces
+            && self.lighting.same_textures(scene);
         if unchanged {
             return Ok(links::UpdateStats::default());
         }

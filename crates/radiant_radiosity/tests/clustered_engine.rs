@@ -392,6 +392,21 @@ fn a_geometry_edit_keeps_what_stayed_of_textures_and_enclosure_bit_for_bit() {
     let (lo, hi) = same_terms(b, f);
     assert!(hi > 1.5 * lo, "the checker shows: {lo} to {hi}");
 
+    // A geometry edit brings its scene's lights along, even when no triangle moved.
+    let mut b = fresh(&moved, &p);
+    let mut lit = moved.clone();
+    lit.lights.push(radiant_scene::Light {
+        name: "sun".into(),
+        kind: radiant_scene::LightKind::Directional,
+        position: glam::DVec3::ZERO,
+        direction: glam::DVec3::new(0.2, -0.3, 1.0).normalize(),
+        intensity: 2.0,
+        color: [1.0, 0.9, 0.8],
+        range: None,
+    });
+    b.edit_geometry(&lit, &|_, _, _| {}, None).expect("edits");
+    same_terms(b, fresh(&lit, &p));
+
     // The floor's texture coordinates shifted by half a square, nothing moved: its
     // footprints are read again.
     let mut b = fresh(&moved, &p);

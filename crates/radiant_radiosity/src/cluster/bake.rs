@@ -619,6 +619,8 @@ impl ClusterBake {
         let matched = RootMatch::new(&self.mesh, &mesh);
         if matched.unchanged()
             && scene.surfaces == self.surfaces
+            && scene.lights == self.lighting.lights
+            && scene.sky == self.lighting.sky
             && self.lighting.same_textures(scene)
         {
             return Ok(GeometryEdit {
