@@ -309,6 +309,10 @@ impl ClusterBake {
                     }
                     _ => None,
                 };
+                // Room for an edit's rows to be built in these (see HierSystem::new_in).
+                let room = sv.rows.src.len() / 64;
+                let _ =
+                    (sv.rows.src.try_reserve_exact(room)).and(sv.rows.ff.try_reserve_exact(room));
                 let sys = HierSystem::from_rows(&mesh, &tree, sv.rows, rho, source, sv.dead);
                 (sys, sv.refinement, Some(sv.radiosity), record)
             }
