@@ -10,7 +10,9 @@
 //! where `B_old = E + ρ H_old` is what the scene shows when drawn with the current light map,
 //! `ΔF` the delta form factors of the hemicube (normalised so they sum to 1, as the CPU
 //! hemicube's), and `D` the light of punctual lights (irradiance / π, with shadow rays on the
-//! CPU). The light map holds `H`, the incident radiance in emissive units, as the bake's
+//! CPU) and, by default, of emissive triangles in closed form (the point-to-triangle form
+//! factor times the clear share of shadow rays; the emitters then draw only what they
+//! reflect, so a small light's aliasing leaves the hemicubes). The light map holds `H`, the incident radiance in emissive units, as the bake's
 //! (`radiant_radiosity::lightmap`): a surface of reflectance `ρ` shows `E + ρ H`.
 //!
 //! On the GPU (`gather.wgsl`): receivers go in batches onto one atlas of hemicube cells (3R × R
@@ -59,7 +61,19 @@ pub struct GatherParams {
     pub tolerance: f64,
     /// At most this many sweeps.
     pub max_iterations: u32,
+    /// Light straight from emissive surfaces as a closed form with shadow rays (the point to
+    /// triangle form factor, times the clear share of [`EMITTER_RAYS`] rays to each emissive
+    /// triangle) instead of the emitters' pixels, which alias a small light: the hemicubes
+    /// then gather what surfaces reflect. Used when there are at most [`ANALYTIC_EMITTERS`]
+    /// emissive triangles.
+    pub analytic_emitters: bool,
 }
+
+/// Shadow rays from a receiver to each emissive triangle ([`GatherParams::analytic_emitters`]).
+pub const EMITTER_RAYS: u32 = 16;
+
+/// At most this many emissive triangles are lit in closed form; more are drawn.
+pub const ANALYTIC_EMITTERS: usize = 256;
 
 impl Default for GatherParams {
     fn default() -> Self {
@@ -69,6 +83,7 @@ impl Default for GatherParams {
             page_side: 2048,
             tolerance: 1e-3,
             max_iterations: 500,
+            analytic_emitters: true,
         }
     }
 }
@@ -240,8 +255,27 @@ impl GpuGather {
         if receivers.is_empty() {
             return Err(GatherError::NoGeometry);
         }
-        let gpu_receivers = gpu_receivers(scene, &frame, &receivers, &baked);
+        let emitters: Vec<Emitter> = scene
+            .triangles
+            .iter()
+            .zip(&baked)
+            .filter_map(|(t, &b)| {
+                let e = scene.surfaces.get(t.surface as usize)?.emission;
+                let v = t.vertices.map(|v| frame.local(v));
+                let n = (v[1] - v[0]).cross(v[2] - v[0]).normalize_or_zero();
+                (b && e.iter().any(|&c| c > 0.0) && n != DVec3::ZERO).then_some(Emitter {
+                    v,
+                    n,
+                    emission: e,
+                })
+            })
+            .collect();
+        let analytic = params.analytic_emitters && emitters.len() <= ANALYTIC_EMITTERS;
+        let emitters = if analytic { &emitters[..] } else { &[] };
+        let gpu_receivers = gpu_receivers(scene, &frame, &receivers, &baked, emitters);
         let vertices = gpu::vertices(scene, &atlas, &frame, &baked);
+        // Emitters lit in closed form draw only what they reflect.
+        let drawn = |e: f64| if analytic { 0.0 } else { e as f32 };
         let materials: Vec<gpu::GpuMaterial> = scene
             .surfaces
             .iter()
@@ -253,9 +287,9 @@ impl GpuGather {
                     0.0,
                 ],
                 emission: [
-                    s.emission[0] as f32,
-                    s.emission[1] as f32,
-                    s.emission[2] as f32,
+                    drawn(s.emission[0]),
+                    drawn(s.emission[1]),
+                    drawn(s.emission[2]),
                     0.0,
                 ],
             })
@@ -646,11 +680,65 @@ fn basis(n: DVec3) -> (DVec3, DVec3) {
 }
 
 /// The receivers as the GPU reads them: frame, lifted centre, texel and punctual light.
+/// An emissive triangle lit in closed form (local frame).
+struct Emitter {
+    v: [DVec3; 3],
+    n: DVec3,
+    emission: Rgb,
+}
+
+/// What `emitter` sends to the point `x` facing `n` (local frame), as `H`: its emission times
+/// the point-to-triangle form factor times the clear share of [`EMITTER_RAYS`] stratified rays
+/// to it, each weighted by its kernel `cos cos / d²` (so a near, half-hidden emitter is not
+/// judged by its far part).
+fn emitter_light(vis: &dyn Visibility, x: DVec3, n: DVec3, e: &Emitter, seed: u64) -> Rgb {
+    let f0 = radiant_radiosity::form_factors::analytic::point_to_triangle(x, n, &e.v, e.n);
+    if f0.is_nan() || f0 <= 0.0 {
+        return [0.0; 3];
+    }
+    let from = x + n * 1e-4;
+    let side = f64::from(EMITTER_RAYS).sqrt().ceil() as u32;
+    let mut state = seed | 1;
+    let mut next = || {
+        // xorshift64*: a fixed sequence per receiver and emitter.
+        state ^= state >> 12;
+        state ^= state << 25;
+        state ^= state >> 27;
+        (state.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let (mut clear, mut all) = (0.0f64, 0.0f64);
+    for k in 0..side * side {
+        let (u, v) = (
+            (f64::from(k % side) + next()) / f64::from(side),
+            (f64::from(k / side) + next()) / f64::from(side),
+        );
+        let su = u.sqrt();
+        let p = e.v[0] * (1.0 - su) + e.v[1] * (su * (1.0 - v)) + e.v[2] * (su * v);
+        let d = p - from;
+        let (cr, cs) = (n.dot(d), -e.n.dot(d));
+        let d2 = d.length_squared();
+        if cr <= 0.0 || cs <= 0.0 || d2 <= 0.0 {
+            continue;
+        }
+        let w = cr * cs / (d2 * d2);
+        all += w;
+        if vis.segment_clear(from.as_vec3(), p.as_vec3()) {
+            clear += w;
+        }
+    }
+    if all.is_nan() || all <= 0.0 {
+        return [0.0; 3];
+    }
+    let f = f0 * clear / all;
+    e.emission.map(|c| c * f)
+}
+
 fn gpu_receivers(
     scene: &Scene,
     frame: &Frame,
     receivers: &[Receiver],
     baked: &[bool],
+    emitters: &[Emitter],
 ) -> Vec<gpu::GpuReceiver> {
     use rayon::prelude::*;
     let local_tris: Vec<[Vec3; 3]> = scene
@@ -660,7 +748,7 @@ fn gpu_receivers(
         .filter(|(_, b)| **b)
         .map(|(t, _)| t.vertices.map(|v| frame.local(v).as_vec3()))
         .collect();
-    let vis = (!scene.lights.is_empty()).then(|| Bvh::new(&local_tris));
+    let vis = (!scene.lights.is_empty() || !emitters.is_empty()).then(|| Bvh::new(&local_tris));
     let lights: Vec<(DVec3, &radiant_scene::Light)> = scene
         .lights
         .iter()
@@ -712,6 +800,18 @@ fn gpu_receivers(
                     }
                     for (k, d) in direct.iter_mut().enumerate() {
                         *d += irr * light.color[k] / std::f64::consts::PI;
+                    }
+                }
+            }
+            if let Some(vis) = &vis {
+                for (i, e) in emitters.iter().enumerate() {
+                    let seed = (u64::from(r.texel.x) << 40)
+                        ^ (u64::from(r.texel.y) << 16)
+                        ^ (u64::from(r.texel.page) << 60)
+                        ^ (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+                    let h = emitter_light(vis, x, n, e, seed);
+                    for (d, v) in direct.iter_mut().zip(h) {
+                        *d += v;
                     }
                 }
             }
