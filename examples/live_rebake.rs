@@ -43,17 +43,6 @@ fn run(app: &mut App, t0: Instant) -> (Snapshots, Vec<f64>) {
     }
 }
 
-fn rel_rms(a: &[Rgb], b: &[Rgb]) -> f64 {
-    let (mut num, mut den) = (0.0, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        for c in 0..3 {
-            num += (x[c] - y[c]).powi(2);
-            den += y[c].powi(2);
-        }
-    }
-    (num / den.max(1e-300)).sqrt()
-}
-
 fn report(what: &str, snaps: &[(f64, Arc<Vec<Rgb>>)], frames: &mut [f64]) {
     let Some((_, last)) = snaps.last() else {
         return;
@@ -62,7 +51,7 @@ fn report(what: &str, snaps: &[(f64, Arc<Vec<Rgb>>)], frames: &mut [f64]) {
     println!("  {:>9}  {:>10}", "t (ms)", "rel. RMS");
     let mut first_1pc = None;
     for (t, b) in snaps {
-        let e = rel_rms(b, last);
+        let e = radiant::radiosity::metrics::relative_difference(b, last);
         if e < 0.01 && first_1pc.is_none() {
             first_1pc = Some(*t);
         }

@@ -493,6 +493,36 @@ fn level_app() -> (App, radiant_scene::Scene) {
     (app, fine)
 }
 
+/// Moves the short block of a world baked with the clustered hierarchy by `dx` and checks
+/// that the edit is applied in place: one build, one geometry edit, the links of a fresh
+/// clustered bake of the moved scene, fewer form factors computed (hidden links included)
+/// than that fresh bake computes, and its light within 0.1 %.
+fn move_short_block_in_place(app: &mut App, dx: f64) {
+    let mut q = app.world.query::<(&Name, &mut Transform)>();
+    for (n, mut t) in q.iter_mut(&mut app.world) {
+        if n.as_str().starts_with("short_block") {
+            t.translation.x += dx;
+        }
+    }
+    app.update();
+    converge(app);
+    let moved = app.world.resource::<BakeStatus>().clone();
+    assert_eq!(
+        (moved.counts.builds, moved.counts.geometry_edits),
+        (1, 1),
+        "{moved:?}"
+    );
+    let want = clustered(&gather_scene(&mut app.world));
+    assert_eq!(moved.size.links, want.report.links);
+    let fresh_ff = want.report.clusters.as_ref().map_or(0, |c| c.form_factors);
+    assert!(
+        moved.counts.links_recomputed > 0 && (moved.counts.links_recomputed as u64) < fresh_ff,
+        "{} of {fresh_ff}",
+        moved.counts.links_recomputed
+    );
+    assert_surfaces_close(app, &want, 1e-3);
+}
+
 fn clustered(scene: &radiant_scene::Scene) -> radiant_radiosity::BakeResult {
     use radiant_radiosity::cluster;
     cluster::bake(
@@ -556,30 +586,7 @@ fn a_level_bakes_clustered_in_the_world_pauses_and_keeps_its_links_through_edits
     assert_surfaces_close(&app, &want, 0.02);
     // A geometry edit of a level refines only what it touches: still one build, the links a
     // fresh bake of the moved level has, and its light once converged.
-    let mut q = app.world.query::<(&Name, &mut Transform)>();
-    for (n, mut t) in q.iter_mut(&mut app.world) {
-        if n.as_str().starts_with("short_block") {
-            t.translation.x += 0.04;
-        }
-    }
-    app.update();
-    converge(&mut app);
-    let moved = app.world.resource::<BakeStatus>().clone();
-    assert_eq!(
-        (moved.counts.builds, moved.counts.geometry_edits),
-        (1, 1),
-        "{moved:?}"
-    );
-    let want = clustered(&gather_scene(&mut app.world));
-    assert_eq!(moved.size.links, want.report.links);
-    // Form factors computed, hidden links included: fewer than a fresh bake computes.
-    let fresh_ff = want.report.clusters.as_ref().map_or(0, |c| c.form_factors);
-    assert!(
-        moved.counts.links_recomputed > 0 && (moved.counts.links_recomputed as u64) < fresh_ff,
-        "{} of {fresh_ff}",
-        moved.counts.links_recomputed
-    );
-    assert_surfaces_close(&app, &want, 1e-3);
+    move_short_block_in_place(&mut app, 0.04);
 }
 
 #[test]
@@ -604,29 +611,7 @@ fn the_plain_box_bakes_clustered_when_asked_and_a_moved_block_refines_only_what_
         *app.world.resource::<BakedLighting>().radiosity,
         want.radiosity
     );
-    let mut q = app.world.query::<(&Name, &mut Transform)>();
-    for (n, mut t) in q.iter_mut(&mut app.world) {
-        if n.as_str().starts_with("short_block") {
-            t.translation.x += 0.05;
-        }
-    }
-    app.update();
-    converge(&mut app);
-    let moved = app.world.resource::<BakeStatus>().clone();
-    assert_eq!(
-        (moved.counts.builds, moved.counts.geometry_edits),
-        (1, 1),
-        "{moved:?}"
-    );
-    let want = clustered(&gather_scene(&mut app.world));
-    assert_eq!(moved.size.links, want.report.links);
-    let fresh_ff = want.report.clusters.as_ref().map_or(0, |c| c.form_factors);
-    assert!(
-        moved.counts.links_recomputed > 0 && (moved.counts.links_recomputed as u64) < fresh_ff,
-        "{} of {fresh_ff}",
-        moved.counts.links_recomputed
-    );
-    assert_surfaces_close(&app, &want, 1e-3);
+    move_short_block_in_place(&mut app, 0.05);
 }
 
 #[test]

@@ -698,22 +698,14 @@ fn emitter_light(vis: &dyn Visibility, x: DVec3, n: DVec3, e: &Emitter, seed: u6
     }
     let from = x + n * 1e-4;
     let side = f64::from(EMITTER_RAYS).sqrt().ceil() as u32;
-    let mut state = seed | 1;
-    let mut next = || {
-        // xorshift64*: a fixed sequence per receiver and emitter.
-        state ^= state >> 12;
-        state ^= state << 25;
-        state ^= state >> 27;
-        (state.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rng = radiant_radiosity::rng::Rng::new(seed);
     let (mut clear, mut all) = (0.0f64, 0.0f64);
     for k in 0..side * side {
         let (u, v) = (
-            (f64::from(k % side) + next()) / f64::from(side),
-            (f64::from(k / side) + next()) / f64::from(side),
+            (f64::from(k % side) + rng.f64()) / f64::from(side),
+            (f64::from(k / side) + rng.f64()) / f64::from(side),
         );
-        let su = u.sqrt();
-        let p = e.v[0] * (1.0 - su) + e.v[1] * (su * (1.0 - v)) + e.v[2] * (su * v);
+        let p = radiant_radiosity::form_factors::sample_triangle(&e.v, u, v);
         let d = p - from;
         let (cr, cs) = (n.dot(d), -e.n.dot(d));
         let d2 = d.length_squared();
@@ -805,10 +797,9 @@ fn gpu_receivers(
             }
             if let Some(vis) = &vis {
                 for (i, e) in emitters.iter().enumerate() {
-                    let seed = (u64::from(r.texel.x) << 40)
-                        ^ (u64::from(r.texel.y) << 16)
-                        ^ (u64::from(r.texel.page) << 60)
-                        ^ (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+                    let texel = u64::from(r.texel.x) | (u64::from(r.texel.y) << 32);
+                    let seed =
+                        radiant_radiosity::rng::hash(texel, u64::from(r.texel.page), i as u64);
                     let h = emitter_light(vis, x, n, e, seed);
                     for (d, v) in direct.iter_mut().zip(h) {
                         *d += v;

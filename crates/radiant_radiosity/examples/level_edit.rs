@@ -10,18 +10,7 @@
 use std::time::Instant;
 
 use radiant_radiosity::cluster::{ClusterBake, ClusterParams, Watch};
-use radiant_radiosity::{BakeParams, Rgb};
-
-fn rel_rms(a: &[Rgb], b: &[Rgb]) -> f64 {
-    let (mut num, mut den) = (0.0, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        for c in 0..3 {
-            num += (x[c] - y[c]).powi(2);
-            den += y[c].powi(2);
-        }
-    }
-    (num / den.max(1e-300)).sqrt()
-}
+use radiant_radiosity::BakeParams;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -105,7 +94,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("seconds since the edit began, and the light's error against the converged one:");
     let mut within = None;
     for (s, b) in &lights {
-        let err = rel_rms(b, &last);
+        let err = radiant_radiosity::metrics::relative_difference(b, &last);
         println!("  {:>8.3} s  {:.4} %", edited + s, 100.0 * err);
         if err < 0.01 && within.is_none() {
             within = Some(edited + s);

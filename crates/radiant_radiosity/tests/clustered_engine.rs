@@ -37,6 +37,19 @@ fn worst(a: &BakeResult, b: &BakeResult) -> f64 {
     w
 }
 
+/// A sun over the box's open side.
+fn sun() -> radiant_scene::Light {
+    radiant_scene::Light {
+        name: "sun".into(),
+        kind: radiant_scene::LightKind::Directional,
+        position: glam::DVec3::ZERO,
+        direction: glam::DVec3::new(0.2, -0.3, 1.0).normalize(),
+        intensity: 2.0,
+        color: [1.0, 0.9, 0.8],
+        range: None,
+    }
+}
+
 fn temp(name: &str) -> std::path::PathBuf {
     std::env::temp_dir().join(format!("radiant-{name}-{}.ckpt", std::process::id()))
 }
@@ -190,15 +203,7 @@ fn material_and_light_edits_keep_the_links_and_match_a_fresh_bake() {
 
     // A sun added over the box's open side: its direct light is traced, the links kept.
     let mut lit = scene.clone();
-    lit.lights.push(radiant_scene::Light {
-        name: "sun".into(),
-        kind: radiant_scene::LightKind::Directional,
-        position: glam::DVec3::ZERO,
-        direction: glam::DVec3::new(0.2, -0.3, 1.0).normalize(),
-        intensity: 2.0,
-        color: [1.0, 0.9, 0.8],
-        range: None,
-    });
+    lit.lights.push(sun());
     b.edit_lights_and_sky(&lit.lights, None).expect("edits");
     assert_eq!(b.links(), links);
     let after = run(b);
@@ -231,15 +236,7 @@ fn a_geometry_edit_refines_only_what_it_touches_and_equals_a_fresh_bake() {
         &radiant_scene::builtin("cornell-box").expect("builtin"),
         2,
     );
-    scene.lights.push(radiant_scene::Light {
-        name: "sun".into(),
-        kind: radiant_scene::LightKind::Directional,
-        position: glam::DVec3::ZERO,
-        direction: glam::DVec3::new(0.2, -0.3, 1.0).normalize(),
-        intensity: 2.0,
-        color: [1.0, 0.9, 0.8],
-        range: None,
-    });
+    scene.lights.push(sun());
     let p = params();
     let mut b = fresh(&scene, &p);
     b.run_to_end(&|_, _, _| {}, &mut Watch::default())
@@ -395,15 +392,7 @@ fn a_geometry_edit_keeps_what_stayed_of_textures_and_enclosure_bit_for_bit() {
     // A geometry edit brings its scene's lights along, even when no triangle moved.
     let mut b = fresh(&moved, &p);
     let mut lit = moved.clone();
-    lit.lights.push(radiant_scene::Light {
-        name: "sun".into(),
-        kind: radiant_scene::LightKind::Directional,
-        position: glam::DVec3::ZERO,
-        direction: glam::DVec3::new(0.2, -0.3, 1.0).normalize(),
-        intensity: 2.0,
-        color: [1.0, 0.9, 0.8],
-        range: None,
-    });
+    lit.lights.push(sun());
     b.edit_geometry(&lit, &|_, _, _| {}, None).expect("edits");
     same_terms(b, fresh(&lit, &p));
 

@@ -76,32 +76,28 @@ impl Moved {
 
     /// Whether nothing that moved comes within `wide` (and [`MARGIN`]) of the segment `a b`.
     pub fn clear_of(&self, a: DVec3, b: DVec3, wide: f64) -> bool {
-        let ab = b - a;
-        let len2 = ab.length_squared();
-        let clear = |&(c, radius): &(DVec3, f64)| {
-            let t = if len2 > 0.0 {
-                ((c - a).dot(ab) / len2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            (a + ab * t).distance(c) > wide + radius + MARGIN
-        };
+        let clear =
+            |&(c, radius): &(DVec3, f64)| distance(c, a, b - a, 1.0) > wide + radius + MARGIN;
         clear(&self.all) || self.spheres.iter().all(clear)
     }
 
     /// Whether the ray from `o` along `d` (to any distance) may meet what moved.
     pub fn ray_meets(&self, o: DVec3, d: DVec3) -> bool {
-        let len2 = d.length_squared();
-        let near = |&(c, radius): &(DVec3, f64)| {
-            let t = if len2 > 0.0 {
-                ((c - o).dot(d) / len2).max(0.0)
-            } else {
-                0.0
-            };
-            (o + d * t).distance(c) <= radius + MARGIN
-        };
+        let near =
+            |&(c, radius): &(DVec3, f64)| distance(c, o, d, f64::INFINITY) <= radius + MARGIN;
         near(&self.all) && self.spheres.iter().any(near)
     }
+}
+
+/// The distance from `c` to the points `o + t d`, `t` in `[0, tmax]`.
+fn distance(c: DVec3, o: DVec3, d: DVec3, tmax: f64) -> f64 {
+    let len2 = d.length_squared();
+    let t = if len2 > 0.0 {
+        ((c - o).dot(d) / len2).clamp(0.0, tmax)
+    } else {
+        0.0
+    };
+    (o + d * t).distance(c)
 }
 
 /// The old bake's parts an edit needs.

@@ -413,7 +413,7 @@ impl Record {
     /// A record from its ops and sizes (a checkpoint's), its links found by walking the pairs
     /// from `root`'s self-link (`children(node)`: a node's children, none for an element) and
     /// taking each link's form factor from `ff(r, s)`. `None` unless the ops make one whole
-    /// refinement whose sized subtrees are `sized`.
+    /// refinement whose sized subtrees, and only those, have the sizes in `sized`.
     pub fn rebuilt(
         ops: Vec<u8>,
         sized: Vec<Extent>,
@@ -423,42 +423,77 @@ impl Record {
     ) -> Option<Record> {
         let mut links = Vec::new();
         let mut stack = vec![(root, root)];
-        let mut n_sized = 0usize;
+        // Open splits: where each starts, its children still to come, its sized entry.
+        let mut open: Vec<(Pos, usize, Option<usize>)> = Vec::new();
+        let mut pos = Pos::default();
         for &code in &ops {
             let (r, s) = stack.pop()?;
-            n_sized += usize::from(code & SIZED != 0);
+            let start = pos;
+            pos.ops += 1;
+            let sized_at = (code & SIZED != 0).then_some(pos.sized as usize);
+            pos.sized += u64::from(sized_at.is_some());
             let op = Op::from_code(code);
-            let split = |n: u32, want: usize| {
-                let (c, k) = children(n);
-                (k == want || op == Op::SplitSelf).then_some((c, k))
-            };
             let want = if code & FOUR != 0 { 4 } else { 2 };
-            match op {
-                Op::Link => links.push(Link {
-                    recv: r,
-                    src: s,
-                    ff: ff(r, s),
-                }),
-                Op::Cull | Op::Zero => {}
+            let split = |n: u32| {
+                let (c, k) = children(n);
+                (k == want).then_some((c, k))
+            };
+            let n = match op {
+                Op::Link => {
+                    links.push(Link {
+                        recv: r,
+                        src: s,
+                        ff: ff(r, s),
+                    });
+                    pos.links += 1;
+                    0
+                }
+                Op::Cull | Op::Zero => 0,
                 Op::SplitSelf => {
-                    let (c, k) = split(r, 2)?;
+                    let (c, k) = children(r);
                     if k != 2 || r != s {
                         return None;
                     }
                     let (a, b) = (c[0], c[1]);
                     stack.extend([(b, b), (b, a), (a, b), (a, a)]);
+                    4
                 }
                 Op::SplitRecv => {
-                    let (c, k) = split(r, want)?;
+                    let (c, k) = split(r)?;
                     stack.extend(c[..k].iter().rev().map(|&x| (x, s)));
+                    k
                 }
                 Op::SplitSrc => {
-                    let (c, k) = split(s, want)?;
+                    let (c, k) = split(s)?;
                     stack.extend(c[..k].iter().rev().map(|&x| (r, x)));
+                    k
+                }
+            };
+            if n > 0 {
+                open.push((start, n, sized_at));
+                continue;
+            }
+            if sized_at.is_some() {
+                return None;
+            }
+            // A subtree ended: so may the splits above it, each held to its size.
+            while let Some(top) = open.last_mut() {
+                top.1 -= 1;
+                if top.1 > 0 {
+                    break;
+                }
+                let (start, _, at) = open.pop()?;
+                let e = start.to(pos);
+                let fits = match at {
+                    Some(i) => e.ops >= SIZED_AT && sized.get(i) == Some(&e),
+                    None => e.ops < SIZED_AT,
+                };
+                if !fits {
+                    return None;
                 }
             }
         }
-        (stack.is_empty() && n_sized == sized.len()).then_some(Record {
+        (stack.is_empty() && open.is_empty() && pos.sized == sized.len() as u64).then_some(Record {
             ops,
             links,
             sized,
@@ -643,6 +678,41 @@ mod tests {
         for s in chain.into_iter().rev() {
             rec.close_split(s);
         }
+    }
+
+    #[test]
+    fn a_record_is_rebuilt_from_its_ops_and_sizes_and_refused_when_they_disagree() {
+        // Any consistent tree will do: node n splits into n + 10⁶ (an element) and n + 1.
+        let children = |n: u32| {
+            if n < 1_000_000 {
+                ([n + 1_000_000, n + 1, 0, 0], 2)
+            } else {
+                ([0; 4], 0)
+            }
+        };
+        let mut rec = Record::default();
+        large(&mut rec, 0);
+        assert!(!rec.sized.is_empty());
+        let ff = |r: u32, s: u32| (r + s) as f32;
+        let again =
+            Record::rebuilt(rec.ops.clone(), rec.sized.clone(), 0, children, ff).expect("rebuilt");
+        assert_eq!((&again.ops, &again.sized), (&rec.ops, &rec.sized));
+        assert_eq!(again.links.len(), rec.links.len());
+        assert!(again.links.iter().all(|l| l.ff == (l.recv + l.src) as f32));
+        // A size that is not its subtree's, a size flag taken away or added, ops cut short:
+        // refused, not read past.
+        let mut sized = rec.sized.clone();
+        sized[3].ops += 1;
+        assert!(Record::rebuilt(rec.ops.clone(), sized, 0, children, ff).is_none());
+        let mut ops = rec.ops.clone();
+        ops[0] &= !SIZED;
+        assert!(Record::rebuilt(ops, rec.sized.clone(), 0, children, ff).is_none());
+        let mut ops = rec.ops.clone();
+        let last = ops.len() - 1;
+        ops[last] |= SIZED;
+        assert!(Record::rebuilt(ops, rec.sized.clone(), 0, children, ff).is_none());
+        let cut = rec.ops[..rec.ops.len() - 1].to_vec();
+        assert!(Record::rebuilt(cut, rec.sized.clone(), 0, children, ff).is_none());
     }
 
     #[test]

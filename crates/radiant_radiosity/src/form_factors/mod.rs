@@ -135,9 +135,9 @@ pub fn method(kind: FormFactorKind) -> &'static dyn FormFactorMethod {
     }
 }
 
-/// A uniformly distributed point on a triangle.
+/// A uniformly distributed point on a triangle, from two uniform numbers in [0, 1).
 #[inline]
-pub(crate) fn sample_triangle(v: &[DVec3; 3], r1: f64, r2: f64) -> DVec3 {
+pub fn sample_triangle(v: &[DVec3; 3], r1: f64, r2: f64) -> DVec3 {
     let (a, b) = if r1 + r2 > 1.0 {
         (1.0 - r1, 1.0 - r2)
     } else {
