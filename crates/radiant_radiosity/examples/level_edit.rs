@@ -9,8 +9,8 @@
 
 use std::time::Instant;
 
-use radiant_radiosity::cluster::{ClusterBake, ClusterParams, Watch};
 use radiant_radiosity::BakeParams;
+use radiant_radiosity::cluster::{ClusterBake, ClusterParams, Watch};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
