@@ -32,12 +32,13 @@ fn params(
     texel_density: Option<f64>,
     page: u32,
 ) -> radiant::gather::GatherParams {
+    let defaults = radiant::gather::GatherParams::default();
     radiant::gather::GatherParams {
-        resolution: solve.hemicube_resolution,
+        resolution: solve.hemicube_resolution.unwrap_or(defaults.resolution),
         texel_density,
         page_side: page,
         tolerance: solve.tolerance,
-        ..Default::default()
+        ..defaults
     }
 }
 
@@ -126,6 +127,7 @@ pub fn bake(args: &BakeArgs) -> anyhow::Result<()> {
         "adapter": g.adapter(),
         "receivers": g.receivers(),
         "batches": g.batches(),
+        "batches_drawn_once": g.kept_batches(),
         "hemicube_resolution": params.resolution,
         "converged": converged,
         "iterations": g.iterations(),

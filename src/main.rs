@@ -102,9 +102,10 @@ pub(crate) struct SolveArgs {
     /// Seed for every random choice.
     #[arg(long, default_value_t = FormFactorParams::default().seed)]
     pub(crate) seed: u64,
-    /// Hemicube resolution (pixels along the top face).
-    #[arg(long, default_value_t = FormFactorParams::default().hemicube_resolution)]
-    pub(crate) hemicube_resolution: u32,
+    /// Hemicube resolution (pixels along the top face). Default: 128 for the hemicube form
+    /// factors, 16 for --method gpu-hemicube (whose error comes more from the texels' size).
+    #[arg(long)]
+    pub(crate) hemicube_resolution: Option<u32>,
     /// Monte Carlo rays per element.
     #[arg(long, default_value_t = FormFactorParams::default().monte_carlo_rays)]
     pub(crate) mc_rays: u32,
@@ -264,7 +265,9 @@ impl SolveArgs {
         p.links.far_field = self.far_field;
         p.form_factors = ff;
         p.ff.seed = self.seed;
-        p.ff.hemicube_resolution = self.hemicube_resolution;
+        if let Some(r) = self.hemicube_resolution {
+            p.ff.hemicube_resolution = r;
+        }
         p.ff.monte_carlo_rays = self.mc_rays;
         anyhow::ensure!(
             (1..=65536).contains(&self.sky_rays),

@@ -2,7 +2,8 @@
 //! against Mitsuba after each sweep (surface means), then at the 24 Mitsuba points.
 //!
 //! `cargo run --release -p radiant_gather --example gather_cornell -- [RES] [TEXELS_PER_M]`
-//! (`POINTS=1`: each point; `SURFACES=1`: each surface's mean as CSV).
+//! (`POINTS=1`: each point; `SURFACES=1`: each surface's mean as CSV; `KEEP_BYTES=0`: draw the
+//! hemicubes again every sweep).
 
 use std::time::Instant;
 
@@ -11,7 +12,11 @@ use radiant_radiosity::metrics;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let res = args.first().map_or(Ok(64), |s| s.parse())?;
+    let res = args
+        .first()
+        .map(|s| s.parse())
+        .transpose()?
+        .unwrap_or(GatherParams::default().resolution);
     let density = args.get(1).map(|s| s.parse::<f64>()).transpose()?;
     let scene = radiant_scene::builtin("cornell-box")?;
     let reference = metrics::parse_reference_csv(metrics::CORNELL_BOX_REFERENCE)?;
@@ -21,13 +26,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         &GatherParams {
             resolution: res,
             texel_density: density,
+            keep_bytes: match std::env::var("KEEP_BYTES") {
+                Ok(v) => v.parse()?,
+                Err(_) => GatherParams::default().keep_bytes,
+            },
             ..GatherParams::default()
         },
     )?;
     println!(
-        "{} receivers, {} batch(es), setup {:.2} s on {}",
+        "{} receivers at {:.1} texels/m, {} batch(es) ({} drawn once), setup {:.2} s on {}",
         g.receivers(),
+        g.atlas().density,
         g.batches(),
+        g.kept_batches(),
         g.setup_seconds(),
         g.adapter()
     );

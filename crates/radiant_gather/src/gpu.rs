@@ -1,5 +1,10 @@
-//! The GPU half of the gather: buffers, the two light maps, the hemicube atlas, pipelines, and
+//! The GPU half of the gather: buffers, the two light maps, the hemicube atlases, pipelines, and
 //! one sweep as one command buffer.
+//!
+//! A hemicube pixel holds what it sees (light-map coordinates, page and material), not a colour,
+//! so a receiver's hemicube, which does not change between sweeps, is drawn once and kept: each
+//! later sweep is only the reduction, which looks the current light map up. Batches whose ids
+//! do not fit [`Setup::keep_bytes`] are drawn again every sweep into one shared atlas.
 
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
@@ -17,7 +22,13 @@ use crate::{Frame, GatherError};
 /// once a sweep's increment fell below half a unit in the last place, nothing changed.)
 const MAP_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 const MAP_FORMAT_HALF: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
-const HEMICUBE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+/// What a hemicube pixel sees (`gather.wgsl`): x the light-map coordinates (two unorm16), y the
+/// page (8 bits) over the material + 1 (24 bits); 0 nothing (the sky), all ones a back face.
+const ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rg32Uint;
+/// Bytes of one hemicube pixel's id.
+pub(crate) const ID_BYTES: u64 = 8;
+/// Pages the ids can name.
+const MAX_PAGES: u32 = 255;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 /// Widest hemicube atlas (pixels); a batch fills it with cells of 3R × R.
 const ATLAS_SIDE: u32 = 4096;
@@ -32,12 +43,7 @@ pub(crate) struct GpuReceiver {
     pub n: [f32; 4],
     pub direct: [f32; 4],
     pub texel: [u32; 4],
-}
-
-/// A surface's mean reflectance and emission.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-pub(crate) struct GpuMaterial {
+    /// Its surface's mean reflectance, and the emission it shows in the hemicubes.
     pub reflectance: [f32; 4],
     pub emission: [f32; 4],
 }
@@ -49,7 +55,6 @@ pub(crate) struct GpuVertex {
     position: [f32; 3],
     uv: [f32; 2],
     page: u32,
-    material: u32,
 }
 
 #[repr(C)]
@@ -61,9 +66,8 @@ struct Params {
     first: u32,
     count: u32,
     near: f32,
-    norm: f32,
     sky_kind: u32,
-    pad: [u32; 3],
+    pad: [u32; 4],
     sky_a: [f32; 4],
     sky_b: [f32; 4],
 }
@@ -82,9 +86,10 @@ pub(crate) struct Setup<'a> {
     pub atlas: &'a Atlas,
     pub receivers: &'a [GpuReceiver],
     pub vertices: &'a [GpuVertex],
-    pub materials: &'a [GpuMaterial],
     pub sky: SkyUniform,
     pub near: f32,
+    /// At most this many bytes of hemicube ids kept between sweeps.
+    pub keep_bytes: u64,
 }
 
 /// The baked triangles' vertices in the local frame, with their light-map coordinates.
@@ -105,7 +110,6 @@ pub(crate) fn vertices(
                 position: [p.x as f32, p.y as f32, p.z as f32],
                 uv: atlas.uv[i][k].to_array(),
                 page: atlas.page[i],
-                material: t.surface,
             });
         }
     }
@@ -114,20 +118,27 @@ pub(crate) fn vertices(
 
 struct Batch {
     count: u32,
-    render: [wgpu::BindGroup; 2],
+    /// Its cells' extent in pixels.
+    size: [u32; 2],
+    /// Its hemicubes' ids (its own texture when kept, else the shared one) and a depth buffer
+    /// of the same size.
+    ids: wgpu::TextureView,
+    depth: wgpu::TextureView,
+    /// Drawn once and kept, or drawn every sweep.
+    kept: bool,
+    /// Whether its kept ids are drawn.
+    drawn: bool,
+    render: wgpu::BindGroup,
     reduce: [wgpu::BindGroup; 2],
 }
 
 /// Everything on the GPU.
 pub(crate) struct Gpu {
     ctx: GpuContext,
-    front: wgpu::RenderPipeline,
-    back: wgpu::RenderPipeline,
+    ids: wgpu::RenderPipeline,
     reduce: wgpu::ComputePipeline,
     vertices: wgpu::Buffer,
     vertex_count: u32,
-    hemicube_view: wgpu::TextureView,
-    depth_view: wgpu::TextureView,
     batches: Vec<Batch>,
     gathered: wgpu::Buffer,
     readback: wgpu::Buffer,
@@ -136,26 +147,37 @@ pub(crate) struct Gpu {
     parity: usize,
 }
 
-/// 1 / the sum of the unnormalised delta form factors `d² / (π q²)` of a hemicube of `res`
-/// (the same pixels as `gather.wgsl` and the CPU hemicube), in f64.
-fn normalisation(res: u32) -> f64 {
+/// The unnormalised delta form factors `d² / (π q²)` (times the height on a side face) of the
+/// pixels of a hemicube cell of `res` (3R × R: the top face, then the side faces two by two, as
+/// `gather.wgsl` lays them out and as the CPU hemicube weighs them), in f64.
+fn delta_form_factors(res: u32) -> Vec<f64> {
     let d = 2.0 / f64::from(res);
     let c = |i: u32| -1.0 + (f64::from(i) + 0.5) * d;
-    let mut total = 0.0;
-    for j in 0..res {
-        for i in 0..res {
-            let q = c(i) * c(i) + c(j) * c(j) + 1.0;
-            total += d * d / (std::f64::consts::PI * q * q);
+    let half = res / 2;
+    let mut out = Vec::with_capacity(3 * res as usize * res as usize);
+    for py in 0..res {
+        for px in 0..3 * res {
+            let x = c(px % res);
+            let w = if px < res {
+                let y = c(py);
+                let q = x * x + y * y + 1.0;
+                1.0 / (q * q)
+            } else {
+                let z = 1.0 - (f64::from(py % half) + 0.5) * d;
+                let q = x * x + z * z + 1.0;
+                z / (q * q)
+            };
+            out.push(w * d * d / std::f64::consts::PI);
         }
     }
-    for j in 0..res / 2 {
-        for i in 0..res {
-            let z = (f64::from(j) + 0.5) * d;
-            let q = c(i) * c(i) + z * z + 1.0;
-            total += 4.0 * z * d * d / (std::f64::consts::PI * q * q);
-        }
-    }
-    1.0 / total
+    out
+}
+
+/// The multiplier buffer: [`delta_form_factors`] scaled to sum to exactly 1.
+fn multipliers(res: u32) -> Vec<f32> {
+    let w = delta_form_factors(res);
+    let total: f64 = w.iter().sum();
+    w.iter().map(|v| (v / total) as f32).collect()
 }
 
 impl Gpu {
@@ -175,10 +197,12 @@ impl Gpu {
         }
         let n = s.receivers.len() as u32;
         let per_batch = (cols * rows_max).min(device.limits().max_compute_workgroups_per_dimension);
-        let rows = n.min(per_batch).div_ceil(cols);
-        let (atlas_w, atlas_h) = (cols * 3 * res, rows * res);
+        let atlas_w = cols * 3 * res;
         let (pages, mw, mh) = (s.atlas.pages.max(1), s.atlas.width, s.atlas.height);
-        if pages > device.limits().max_texture_array_layers || mw > limit || mh > limit {
+        if pages > device.limits().max_texture_array_layers.min(MAX_PAGES)
+            || mw > limit
+            || mh > limit
+        {
             return Err(GatherError::InvalidSetting {
                 field: "light-map page side",
                 value: f64::from(mw.max(mh)),
@@ -215,13 +239,13 @@ impl Gpu {
             })
         };
         let map_views = [array_view(&maps[0]), array_view(&maps[1])];
-        let target = |label: &str, format, usage| {
+        let target = |label: &str, format, usage, height: u32| {
             device
                 .create_texture(&wgpu::TextureDescriptor {
                     label: Some(label),
                     size: wgpu::Extent3d {
                         width: atlas_w,
-                        height: atlas_h,
+                        height,
                         depth_or_array_layers: 1,
                     },
                     mip_level_count: 1,
@@ -233,16 +257,49 @@ impl Gpu {
                 })
                 .create_view(&Default::default())
         };
-        let hemicube_view = target(
-            "gather_hemicubes",
-            HEMICUBE_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-        );
-        let depth_view = target(
-            "gather_depth",
-            DEPTH_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
-        );
+        // Batches in order, each kept with its own ids while they fit `keep_bytes`; the rest
+        // are drawn every sweep into one shared atlas.
+        let counts: Vec<u32> = (0..n)
+            .step_by(per_batch as usize)
+            .map(|first| (n - first).min(per_batch))
+            .collect();
+        let height = |count: u32| count.div_ceil(cols) * res;
+        let mut kept_bytes = 0u64;
+        let kept: Vec<bool> = counts
+            .iter()
+            .map(|&count| {
+                let bytes = u64::from(atlas_w) * u64::from(height(count)) * ID_BYTES;
+                let keep = kept_bytes + bytes <= s.keep_bytes;
+                if keep {
+                    kept_bytes += bytes;
+                }
+                keep
+            })
+            .collect();
+        let ids_usage =
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        let shared = counts
+            .iter()
+            .zip(&kept)
+            .filter(|(_, k)| !**k)
+            .map(|(&count, _)| height(count))
+            .max()
+            .map(|h| (h, target("gather_hemicubes", ID_FORMAT, ids_usage, h)));
+        // One depth buffer per atlas height.
+        let mut depths: Vec<(u32, wgpu::TextureView)> = Vec::new();
+        let mut depth = |h: u32| {
+            if let Some((_, v)) = depths.iter().find(|(dh, _)| *dh == h) {
+                return v.clone();
+            }
+            let v = target(
+                "gather_depth",
+                DEPTH_FORMAT,
+                wgpu::TextureUsages::RENDER_ATTACHMENT,
+                h,
+            );
+            depths.push((h, v.clone()));
+            v
+        };
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("gather_light_map"),
             mag_filter: wgpu::FilterMode::Linear,
@@ -258,11 +315,6 @@ impl Gpu {
             })
         };
         let receivers = storage("gather_receivers", bytemuck::cast_slice(s.receivers));
-        let materials = if s.materials.is_empty() {
-            storage("gather_materials", &[0u8; 32])
-        } else {
-            storage("gather_materials", bytemuck::cast_slice(s.materials))
-        };
         let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("gather_vertices"),
             contents: bytemuck::cast_slice(s.vertices),
@@ -282,16 +334,20 @@ impl Gpu {
             mapped_at_creation: false,
         });
 
-        let vf = wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT;
+        let vs = wgpu::ShaderStages::VERTEX;
         let render_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("gather_render"),
+            entries: &[uniform_entry(0, vs), storage_entry(1, vs)],
+        });
+        let cs = wgpu::ShaderStages::COMPUTE;
+        let reduce_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("gather_reduce"),
             entries: &[
-                uniform_entry(0, vf),
-                storage_entry(1, wgpu::ShaderStages::VERTEX),
-                storage_entry(2, wgpu::ShaderStages::FRAGMENT),
+                uniform_entry(0, cs),
+                storage_entry(1, cs),
                 wgpu::BindGroupLayoutEntry {
                     binding: 3,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    visibility: cs,
                     ty: wgpu::BindingType::Texture {
                         sample_type: wgpu::TextureSampleType::Float { filterable: true },
                         view_dimension: wgpu::TextureViewDimension::D2Array,
@@ -301,23 +357,15 @@ impl Gpu {
                 },
                 wgpu::BindGroupLayoutEntry {
                     binding: 4,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    visibility: cs,
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                     count: None,
                 },
-            ],
-        });
-        let cs = wgpu::ShaderStages::COMPUTE;
-        let reduce_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("gather_reduce"),
-            entries: &[
-                uniform_entry(0, cs),
-                storage_entry(1, cs),
                 wgpu::BindGroupLayoutEntry {
                     binding: 5,
                     visibility: cs,
                     ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                        sample_type: wgpu::TextureSampleType::Uint,
                         view_dimension: wgpu::TextureViewDimension::D2,
                         multisampled: false,
                     },
@@ -343,21 +391,23 @@ impl Gpu {
                     },
                     count: None,
                 },
+                storage_entry(8, cs),
             ],
         });
 
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("gather"),
-            source: wgpu::ShaderSource::Wgsl(shader(map_format).into()),
+            source: wgpu::ShaderSource::Wgsl(
+                shader(map_format, reduce_group(ctx.info.device_type)).into(),
+            ),
         });
         let render_pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("gather_render"),
             bind_group_layouts: &[Some(&render_layout)],
             immediate_size: 0,
         });
-        let attributes =
-            wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x2, 2 => Uint32, 3 => Uint32];
-        let raster = |label: &str, fs: &str, cull: wgpu::Face| {
+        let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x2, 2 => Uint32];
+        let raster = |label: &str, fs: &str| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
                 layout: Some(&render_pl),
@@ -373,11 +423,11 @@ impl Gpu {
                 },
                 primitive: wgpu::PrimitiveState {
                     front_face: wgpu::FrontFace::Ccw,
-                    cull_mode: Some(cull),
+                    cull_mode: None,
                     ..Default::default()
                 },
-                // Reversed depth: nearer is greater. Back faces come second and must be strictly
-                // nearer, so a double-sided surface's twin (same depth, facing this way) wins.
+                // Reversed depth: nearer is greater. Front and back faces in one pass, both sides
+                // drawn (`id_fs` sets a back face a little farther).
                 depth_stencil: Some(wgpu::DepthStencilState {
                     format: DEPTH_FORMAT,
                     depth_write_enabled: Some(true),
@@ -391,7 +441,7 @@ impl Gpu {
                     entry_point: Some(fs),
                     compilation_options: Default::default(),
                     targets: &[Some(wgpu::ColorTargetState {
-                        format: HEMICUBE_FORMAT,
+                        format: ID_FORMAT,
                         blend: None,
                         write_mask: wgpu::ColorWrites::ALL,
                     })],
@@ -400,21 +450,24 @@ impl Gpu {
                 cache: None,
             })
         };
-        let front = raster("gather_front", "front_fs", wgpu::Face::Back);
-        let back = raster("gather_back", "back_fs", wgpu::Face::Front);
+        let ids = raster("gather_ids", "id_fs");
         let reduce_pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("gather_reduce"),
             bind_group_layouts: &[Some(&reduce_layout)],
             immediate_size: 0,
         });
-        let reduce = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("gather_reduce"),
-            layout: Some(&reduce_pl),
-            module: &module,
-            entry_point: Some("reduce_cs"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let compute = |label: &str, entry: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(label),
+                layout: Some(&reduce_pl),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let reduce = compute("gather_reduce", "reduce_cs");
+        let seed = compute("gather_seed", "seed_cs");
 
         let (sky_kind, sky_a, sky_b) = match s.sky {
             SkyUniform::None => (0, [0.0; 3], [0.0; 3]),
@@ -422,21 +475,31 @@ impl Gpu {
             SkyUniform::Gradient(z, h) => (2, z, h),
         };
         let v4 = |v: [f64; 3]| [v[0] as f32, v[1] as f32, v[2] as f32, 0.0];
-        let norm = normalisation(res) as f32;
+        let weights = storage(
+            "gather_multipliers",
+            bytemuck::cast_slice(&multipliers(res)),
+        );
         let mut batches = Vec::new();
         let mut first = 0u32;
-        while first < n {
-            let count = (n - first).min(per_batch);
+        for (&count, &kept) in counts.iter().zip(&kept) {
+            let (h, ids) = match (&shared, kept) {
+                (Some((h, ids)), false) => (*h, ids.clone()),
+                _ => (
+                    height(count),
+                    target("gather_hemicubes_kept", ID_FORMAT, ids_usage, height(count)),
+                ),
+            };
+            // The batch's own size even in the shared atlas (drawn through a viewport of that
+            // size), so a batch rasterises the same, kept or not.
             let params = Params {
-                atlas: [atlas_w as f32, atlas_h as f32],
+                atlas: [atlas_w as f32, height(count) as f32],
                 res,
                 cols,
                 first,
                 count,
                 near: s.near,
-                norm,
                 sky_kind,
-                pad: [0; 3],
+                pad: [0; 4],
                 sky_a: v4(sky_a),
                 sky_b: v4(sky_b),
             };
@@ -445,19 +508,14 @@ impl Gpu {
                 contents: bytemuck::bytes_of(&params),
                 usage: wgpu::BufferUsages::UNIFORM,
             });
-            let render = |p: usize| {
-                device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("gather_render"),
-                    layout: &render_layout,
-                    entries: &[
-                        entry(0, uniform.as_entire_binding()),
-                        entry(1, receivers.as_entire_binding()),
-                        entry(2, materials.as_entire_binding()),
-                        entry(3, wgpu::BindingResource::TextureView(&map_views[p])),
-                        entry(4, wgpu::BindingResource::Sampler(&sampler)),
-                    ],
-                })
-            };
+            let render = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("gather_render"),
+                layout: &render_layout,
+                entries: &[
+                    entry(0, uniform.as_entire_binding()),
+                    entry(1, receivers.as_entire_binding()),
+                ],
+            });
             let reduce = |p: usize| {
                 device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("gather_reduce"),
@@ -465,28 +523,49 @@ impl Gpu {
                     entries: &[
                         entry(0, uniform.as_entire_binding()),
                         entry(1, receivers.as_entire_binding()),
-                        entry(5, wgpu::BindingResource::TextureView(&hemicube_view)),
+                        entry(3, wgpu::BindingResource::TextureView(&map_views[p])),
+                        entry(4, wgpu::BindingResource::Sampler(&sampler)),
+                        entry(5, wgpu::BindingResource::TextureView(&ids)),
                         entry(6, gathered.as_entire_binding()),
                         entry(7, wgpu::BindingResource::TextureView(&map_views[1 - p])),
+                        entry(8, weights.as_entire_binding()),
                     ],
                 })
             };
             batches.push(Batch {
                 count,
-                render: [render(0), render(1)],
+                size: [atlas_w, height(count)],
+                depth: depth(h),
                 reduce: [reduce(0), reduce(1)],
+                ids,
+                kept,
+                drawn: false,
+                render,
             });
             first += count;
         }
+        // The first sweep reads map 0: seed it with what the emitters show.
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("gather_seed"),
+        });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("gather_seed"),
+                timestamp_writes: None,
+            });
+            pass.set_pipeline(&seed);
+            for batch in &batches {
+                pass.set_bind_group(0, &batch.reduce[1], &[]);
+                pass.dispatch_workgroups(batch.count.div_ceil(64), 1, 1);
+            }
+        }
+        ctx.queue.submit([encoder.finish()]);
         ctx.take_errors().map_err(GatherError::Gpu)?;
         Ok(Self {
-            front,
-            back,
+            ids,
             reduce,
             vertex_count: s.vertices.len() as u32,
             vertices,
-            hemicube_view,
-            depth_view,
             batches,
             gathered,
             readback,
@@ -504,8 +583,13 @@ impl Gpu {
         format!("{} ({:?})", self.ctx.info.name, self.ctx.info.backend)
     }
 
-    /// One Jacobi sweep: every batch's hemicubes drawn from the current light map and reduced
-    /// into the other; returns the new `H` per receiver.
+    /// Batches whose hemicube ids are kept between sweeps.
+    pub(crate) fn kept_batches(&self) -> usize {
+        self.batches.iter().filter(|b| b.kept).count()
+    }
+
+    /// One Jacobi sweep: every batch's hemicubes (drawn now unless kept from an earlier sweep)
+    /// reduced with the current light map into the other; returns the new `H` per receiver.
     pub(crate) fn sweep(&mut self) -> Result<Vec<[f32; 3]>, GatherError> {
         let p = self.parity;
         let device = &self.ctx.device;
@@ -513,11 +597,11 @@ impl Gpu {
             label: Some("gather_sweep"),
         });
         for batch in &self.batches {
-            {
+            if !(batch.kept && batch.drawn) {
                 let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("gather_hemicubes"),
                     color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                        view: &self.hemicube_view,
+                        view: &batch.ids,
                         depth_slice: None,
                         resolve_target: None,
                         ops: wgpu::Operations {
@@ -526,7 +610,7 @@ impl Gpu {
                         },
                     })],
                     depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                        view: &self.depth_view,
+                        view: &batch.depth,
                         depth_ops: Some(wgpu::Operations {
                             load: wgpu::LoadOp::Clear(0.0),
                             store: wgpu::StoreOp::Discard,
@@ -537,13 +621,18 @@ impl Gpu {
                     occlusion_query_set: None,
                     multiview_mask: None,
                 });
-                pass.set_bind_group(0, &batch.render[p], &[]);
+                pass.set_viewport(
+                    0.0,
+                    0.0,
+                    batch.size[0] as f32,
+                    batch.size[1] as f32,
+                    0.0,
+                    1.0,
+                );
+                pass.set_bind_group(0, &batch.render, &[]);
                 pass.set_vertex_buffer(0, self.vertices.slice(..));
-                let instances = 0..batch.count * 5;
-                pass.set_pipeline(&self.front);
-                pass.draw(0..self.vertex_count, instances.clone());
-                pass.set_pipeline(&self.back);
-                pass.draw(0..self.vertex_count, instances);
+                pass.set_pipeline(&self.ids);
+                pass.draw(0..self.vertex_count, 0..batch.count * 5);
             }
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("gather_reduce"),
@@ -557,6 +646,9 @@ impl Gpu {
         self.ctx.queue.submit([encoder.finish()]);
         let bytes = read_buffer(&self.ctx, &self.readback).map_err(GatherError::Gpu)?;
         self.ctx.poll_errors().map_err(GatherError::Gpu)?;
+        for batch in &mut self.batches {
+            batch.drawn = batch.kept;
+        }
         self.parity = 1 - p;
         let floats: &[f32] = bytemuck::try_cast_slice(&bytes)
             .map_err(|e| GatherError::Gpu(ReadbackError::Layout(e).into()))?;
@@ -568,14 +660,30 @@ impl Gpu {
     }
 }
 
-/// `gather.wgsl` with the light map's storage format.
-fn shader(map_format: wgpu::TextureFormat) -> String {
+/// Invocations reducing one receiver: a CPU rasteriser runs a workgroup's invocations as SIMD
+/// rows and pays for every barrier, so it gets one row; a GPU gets two or more waves.
+fn reduce_group(device: wgpu::DeviceType) -> u32 {
+    if device == wgpu::DeviceType::Cpu {
+        8
+    } else {
+        64
+    }
+}
+
+/// `gather.wgsl` with the light map's storage format and the reduction's workgroup size.
+fn shader(map_format: wgpu::TextureFormat, group: u32) -> String {
     let format = if map_format == MAP_FORMAT {
         "rgba32float"
     } else {
         "rgba16float"
     };
-    include_str!("gather.wgsl").replace("rgba16float", format)
+    include_str!("gather.wgsl")
+        .replace("rgba16float", format)
+        .replace(
+            "const GROUP: u32 = 8u;",
+            &format!("const GROUP: u32 = {group}u;"),
+        )
+        .replace("@workgroup_size(8)", &format!("@workgroup_size({group})"))
 }
 
 fn entry(binding: u32, resource: wgpu::BindingResource<'_>) -> wgpu::BindGroupEntry<'_> {
@@ -587,19 +695,29 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_normalisation_matches_the_analytic_sum() {
-        // The unnormalised delta form factors sum to about 1 (exactly in the limit).
+    fn the_delta_form_factors_sum_to_the_hemisphere() {
+        // The unnormalised delta form factors sum to about 1 (exactly in the limit); the
+        // multipliers to 1, and the top face's centre weighs the most.
         for res in [8, 64, 256] {
-            let total = 1.0 / normalisation(res);
+            let total: f64 = delta_form_factors(res).iter().sum();
             assert!((total - 1.0).abs() < 0.02, "{res}: {total}");
+            let m = multipliers(res);
+            assert_eq!(m.len(), 3 * res as usize * res as usize);
+            let sum: f64 = m.iter().map(|&v| f64::from(v)).sum();
+            assert!((sum - 1.0).abs() < 1e-5, "{res}: {sum}");
+            let centre = (res / 2 * 3 * res + res / 2) as usize;
+            assert!(m.iter().all(|&v| v > 0.0 && v <= m[centre]));
         }
-        assert!((1.0 / normalisation(512) - 1.0).abs() < 1e-4);
+        let total: f64 = delta_form_factors(512).iter().sum();
+        assert!((total - 1.0).abs() < 1e-4);
     }
 
     #[test]
     fn the_shader_parses_and_validates() {
-        for format in [MAP_FORMAT, MAP_FORMAT_HALF] {
-            let module = naga::front::wgsl::parse_str(&shader(format)).expect("parse");
+        for (format, group) in [(MAP_FORMAT, 8), (MAP_FORMAT_HALF, 64)] {
+            let source = shader(format, group);
+            assert!(source.contains(&format!("@workgroup_size({group})")));
+            let module = naga::front::wgsl::parse_str(&source).expect("parse");
             naga::valid::Validator::new(
                 naga::valid::ValidationFlags::all(),
                 naga::valid::Capabilities::all(),
