@@ -254,13 +254,14 @@ fn the_cornell_box_gives_the_cpu_hemicubes_answer() {
         gpu_vs_mitsuba.mean_rel * 100.0,
         cpu_vs_mitsuba.mean_rel * 100.0
     );
-    // Measured: 2.2 % mean from the CPU hemicube (whose elements are finer than these 2 cm
+    // Measured: 2.1 % mean from the CPU hemicube (whose elements are finer than these 2 cm
     // texels), 1.6 % from Mitsuba (the CPU hemicube 0.9 %).
     assert!(vs_cpu.mean_rel < 0.025, "{vs_cpu:?}");
     assert!(gpu_vs_mitsuba.mean_rel < 0.02, "{gpu_vs_mitsuba:?}");
 
     // The light straight from the emitter in closed form, with shadow rays, instead of its
-    // aliased pixels: closer to Mitsuba (measured 1.12 % mean against 1.66 %).
+    // aliased pixels: closer to Mitsuba (measured 0.84 % mean against 1.58 %; 1.12 % when
+    // every texel whose centre is inside counted alike in a surface's mean).
     let mut g = GpuGather::with_context(
         gpu(),
         &scene,
@@ -280,7 +281,7 @@ fn the_cornell_box_gives_the_cpu_hemicubes_answer() {
         analytic.max_rel * 100.0
     );
     assert!(
-        analytic.mean_rel < 0.014 && analytic.mean_rel < gpu_vs_mitsuba.mean_rel,
+        analytic.mean_rel < 0.01 && analytic.mean_rel < gpu_vs_mitsuba.mean_rel,
         "{analytic:?} against {gpu_vs_mitsuba:?}"
     );
 }
