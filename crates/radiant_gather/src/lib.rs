@@ -493,7 +493,7 @@ impl GpuGather {
         }
         let mut acc = vec![(0.0f64, [0.0f64; 3]); self.surfaces.len()];
         for (i, (t, (inside, ni, ring, nr))) in self.triangles.iter().zip(&per_tri).enumerate() {
-            if !t.baked || !(t.area > 0.0 && t.area.is_finite()) {
+            if !(t.baked && t.area > 0.0 && t.area.is_finite()) {
                 continue;
             }
             let h = match self.coverage.mean(i, &self.h) {
