@@ -159,6 +159,15 @@ fn id_fs(in: FsIn, @builtin(position) position: vec4<f32>, @builtin(front_facing
 @group(0) @binding(7) var next_map: texture_storage_2d_array<rgba16float, write>;
 // Each pixel's delta form factor, normalised so that a cell's sum to 1 (3R × R, as a cell).
 @group(0) @binding(8) var<storage, read> multipliers: array<f32>;
+// H two sweeps back, and this sweep's step weight: H_new = ω J + (1 − ω) H_older (ω = 1: Jacobi).
+@group(0) @binding(9) var<storage, read_write> older: array<vec4<f32>>;
+struct Sweep {
+    omega: f32,
+    pad0: f32,
+    pad1: f32,
+    pad2: f32,
+}
+@group(0) @binding(10) var<uniform> sweep: Sweep;
 
 // Invocations per receiver (`gpu.rs` sets 64 on a GPU: on a CPU rasteriser such as lavapipe,
 // eight, one SIMD row without a barrier's cost, reduce 1.5× faster than 64 and 3× than 256).
@@ -235,8 +244,11 @@ fn reduce_cs(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_
         workgroupBarrier();
     }
     if li == 0u {
-        let h = rc.direct.rgb + partial[0];
-        gathered[params.first + cell] = vec4<f32>(h, 0.0);
+        let i = params.first + cell;
+        let j = rc.direct.rgb + partial[0];
+        let h = j * sweep.omega + older[i].rgb * (1.0 - sweep.omega);
+        older[i] = gathered[i];
+        gathered[i] = vec4<f32>(h, 0.0);
         textureStore(next_map, rc.texel.xy, rc.texel.z, vec4<f32>(rc.emission.rgb + rc.reflectance.rgb * h, 1.0));
     }
 }

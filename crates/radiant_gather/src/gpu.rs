@@ -141,6 +141,8 @@ pub(crate) struct Gpu {
     vertex_count: u32,
     batches: Vec<Batch>,
     gathered: wgpu::Buffer,
+    /// The sweep's step weight ω (`gather.wgsl`'s `Sweep`).
+    sweep_uniform: wgpu::Buffer,
     readback: wgpu::Buffer,
     receivers: usize,
     /// Which light map the next sweep reads (it writes the other).
@@ -327,6 +329,19 @@ impl Gpu {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
+        // H two sweeps back, for the accelerated step.
+        let older = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("gather_older"),
+            size: out_bytes,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        let sweep_uniform = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("gather_sweep"),
+            size: 16,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         let readback = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("gather_readback"),
             size: out_bytes,
@@ -392,6 +407,17 @@ impl Gpu {
                     count: None,
                 },
                 storage_entry(8, cs),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 9,
+                    visibility: cs,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: false },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                uniform_entry(10, cs),
             ],
         });
 
@@ -529,6 +555,8 @@ impl Gpu {
                         entry(6, gathered.as_entire_binding()),
                         entry(7, wgpu::BindingResource::TextureView(&map_views[1 - p])),
                         entry(8, weights.as_entire_binding()),
+                        entry(9, older.as_entire_binding()),
+                        entry(10, sweep_uniform.as_entire_binding()),
                     ],
                 })
             };
@@ -568,6 +596,7 @@ impl Gpu {
             vertices,
             batches,
             gathered,
+            sweep_uniform,
             readback,
             receivers: n as usize,
             parity: 0,
@@ -588,11 +617,18 @@ impl Gpu {
         self.batches.iter().filter(|b| b.kept).count()
     }
 
-    /// One Jacobi sweep: every batch's hemicubes (drawn now unless kept from an earlier sweep)
+    /// One sweep: every batch's hemicubes (drawn now unless kept from an earlier sweep)
     /// reduced with the current light map into the other; returns the new `H` per receiver.
-    pub(crate) fn sweep(&mut self) -> Result<Vec<[f32; 3]>, GatherError> {
+    /// `omega` weighs the step: `H ← ω J(H) + (1 − ω) H_older` (`J` the Jacobi sweep, `H_older`
+    /// the sweep before last); 1 is the plain Jacobi sweep.
+    pub(crate) fn sweep(&mut self, omega: f32) -> Result<Vec<[f32; 3]>, GatherError> {
         let p = self.parity;
         let device = &self.ctx.device;
+        self.ctx.queue.write_buffer(
+            &self.sweep_uniform,
+            0,
+            bytemuck::bytes_of(&[omega, 0.0, 0.0, 0.0]),
+        );
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("gather_sweep"),
         });
