@@ -27,10 +27,12 @@ pub struct Sample {
 }
 
 /// The gather's parameters from the shared solve options.
+/// `memory_limit` (`--memory-limit`) bounds the hemicubes kept between sweeps: at most half of it.
 fn params(
     solve: &SolveArgs,
     texel_density: Option<f64>,
     page: u32,
+    memory_limit: Option<u64>,
 ) -> radiant::gather::GatherParams {
     let defaults = radiant::gather::GatherParams::default();
     radiant::gather::GatherParams {
@@ -38,6 +40,7 @@ fn params(
         texel_density,
         page_side: page,
         tolerance: solve.tolerance,
+        keep_bytes: memory_limit.map_or(defaults.keep_bytes, |l| l / 2),
         ..defaults
     }
 }
@@ -100,7 +103,12 @@ pub fn bake(args: &BakeArgs) -> anyhow::Result<()> {
     let reference = reference_for(&args.scene, args.reference.as_deref())?;
     let (scene, source) = load_scene(&args.scene)?;
     ensure_dir(&args.out)?;
-    let params = params(&args.solve, args.texel_density, args.lightmap_page);
+    let params = params(
+        &args.solve,
+        args.texel_density,
+        args.lightmap_page,
+        args.hierarchy.memory_limit,
+    );
     let rows = reference.as_ref().map(|(_, r)| r.as_slice());
     let (g, samples, converged) = run_gather(&scene, &params, rows, args.solve.time_limit, |s| {
         let error = s.error.map_or(String::new(), |e| {
@@ -128,6 +136,7 @@ pub fn bake(args: &BakeArgs) -> anyhow::Result<()> {
         "receivers": g.receivers(),
         "batches": g.batches(),
         "batches_drawn_once": g.kept_batches(),
+        "keep_bytes": params.keep_bytes,
         "hemicube_resolution": params.resolution,
         "converged": converged,
         "iterations": g.iterations(),
@@ -188,7 +197,7 @@ pub fn curve(
     reference: &[(String, [f64; 3])],
     time_limit: f64,
 ) -> anyhow::Result<Vec<Sample>> {
-    let params = params(solve, None, 2048);
+    let params = params(solve, None, 2048, None);
     let (_, samples, _) = run_gather(scene, &params, Some(reference), Some(time_limit), |_| {})?;
     Ok(samples)
 }

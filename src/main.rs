@@ -184,6 +184,8 @@ pub(crate) struct HierarchyArgs {
     pub(crate) hierarchy: Hierarchy,
     /// Memory budget of a clustered bake, e.g. 4G, 512M or bytes (default: 60 % of the
     /// available memory). Over it the bake coarsens, and refuses with an error in the end.
+    /// With --method gpu-hemicube: at most half of it holds hemicubes drawn once and kept
+    /// between sweeps (default 1 GiB); the others are drawn again every sweep.
     #[arg(long, value_parser = args::parse_size)]
     pub(crate) memory_limit: Option<u64>,
     /// Visibility samples per link of a clustered bake.

@@ -240,7 +240,39 @@ fn bake_with_the_gpu_hemicube_writes_a_light_map_and_its_error() {
     for f in ["surfaces.csv", "lightmap.exr", "lightmap.png"] {
         assert!(out.join(f).is_file(), "{f}");
     }
+    assert_eq!(report["batches_drawn_once"], report["batches"]);
+
+    // --memory-limit bounds the hemicubes kept between sweeps: under 1 MB nothing is kept,
+    // every sweep draws them again, and the light is the same.
+    let tight = tmp("gpu-hemicube-tight");
+    run_ok(
+        &[
+            "bake",
+            "--builtin",
+            "cornell-box",
+            "--method",
+            "gpu-hemicube",
+            "--hemicube-resolution",
+            "32",
+            "--texel-density",
+            "24",
+            "--tolerance",
+            "1e-2",
+            "--memory-limit",
+            "1M",
+        ],
+        &tight,
+    );
+    let tight_report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(tight.join("report.json")).expect("report"))
+            .expect("json");
+    assert_eq!(tight_report["batches_drawn_once"], 0);
+    assert_eq!(
+        tight_report["error_vs_reference"]["mean_rel"],
+        report["error_vs_reference"]["mean_rel"]
+    );
     let _ = std::fs::remove_dir_all(&out);
+    let _ = std::fs::remove_dir_all(&tight);
 }
 
 #[test]
