@@ -204,22 +204,20 @@ fn render_compares_with_the_reference_tracers_image() {
 #[test]
 fn bake_with_the_gpu_hemicube_writes_a_light_map_and_its_error() {
     let out = tmp("gpu-hemicube");
-    let stdout = run_ok(
-        &[
-            "bake",
-            "--builtin",
-            "cornell-box",
-            "--method",
-            "gpu-hemicube",
-            "--hemicube-resolution",
-            "32",
-            "--texel-density",
-            "24",
-            "--tolerance",
-            "1e-2",
-        ],
-        &out,
-    );
+    let args = [
+        "bake",
+        "--builtin",
+        "cornell-box",
+        "--method",
+        "gpu-hemicube",
+        "--hemicube-resolution",
+        "32",
+        "--texel-density",
+        "24",
+        "--tolerance",
+        "1e-2",
+    ];
+    let stdout = run_ok(&args, &out);
     assert!(stdout.contains("gpu-hemicube on"), "{stdout}");
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report"))
@@ -245,24 +243,7 @@ fn bake_with_the_gpu_hemicube_writes_a_light_map_and_its_error() {
     // --memory-limit bounds the hemicubes kept between sweeps: under 1 MB nothing is kept,
     // every sweep draws them again, and the light is the same.
     let tight = tmp("gpu-hemicube-tight");
-    run_ok(
-        &[
-            "bake",
-            "--builtin",
-            "cornell-box",
-            "--method",
-            "gpu-hemicube",
-            "--hemicube-resolution",
-            "32",
-            "--texel-density",
-            "24",
-            "--tolerance",
-            "1e-2",
-            "--memory-limit",
-            "1M",
-        ],
-        &tight,
-    );
+    run_ok(&[&args[..], &["--memory-limit", "1M"]].concat(), &tight);
     let tight_report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(tight.join("report.json")).expect("report"))
             .expect("json");

@@ -10,7 +10,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
 use radiant_render::GpuContext;
 use radiant_render::capture::{ReadbackError, read_buffer};
-use radiant_render::util::{storage_entry, uniform_entry};
+use radiant_render::util::{storage_entry, storage_rw_entry, uniform_entry};
 use radiant_scene::Scene;
 use radiant_scene::atlas::Atlas;
 use wgpu::util::DeviceExt;
@@ -386,16 +386,7 @@ impl Gpu {
                     },
                     count: None,
                 },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 6,
-                    visibility: cs,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Storage { read_only: false },
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
+                storage_rw_entry(6, cs),
                 wgpu::BindGroupLayoutEntry {
                     binding: 7,
                     visibility: cs,
@@ -407,16 +398,7 @@ impl Gpu {
                     count: None,
                 },
                 storage_entry(8, cs),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 9,
-                    visibility: cs,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Storage { read_only: false },
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
+                storage_rw_entry(9, cs),
                 uniform_entry(10, cs),
             ],
         });

@@ -16,11 +16,24 @@ pub fn uniform_entry(binding: u32, stages: wgpu::ShaderStages) -> wgpu::BindGrou
 
 /// A read-only storage buffer binding visible to `stages`.
 pub fn storage_entry(binding: u32, stages: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    storage_buffer(binding, stages, true)
+}
+
+/// A read-write storage buffer binding visible to `stages`.
+pub fn storage_rw_entry(binding: u32, stages: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    storage_buffer(binding, stages, false)
+}
+
+fn storage_buffer(
+    binding: u32,
+    stages: wgpu::ShaderStages,
+    read_only: bool,
+) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: stages,
         ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only: true },
+            ty: wgpu::BufferBindingType::Storage { read_only },
             has_dynamic_offset: false,
             min_binding_size: None,
         },
