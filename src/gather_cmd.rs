@@ -39,7 +39,7 @@ fn params(
         resolution: solve.hemicube_resolution.unwrap_or(defaults.resolution),
         texel_density,
         page_side: page,
-        tolerance: solve.tolerance,
+        tolerance: solve.tolerance.unwrap_or(defaults.tolerance),
         keep_bytes: memory_limit.map_or(defaults.keep_bytes, |l| l / 2),
         ..defaults
     }

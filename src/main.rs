@@ -90,9 +90,11 @@ pub(crate) struct SolveArgs {
     #[arg(long, default_value_t = LinkParams::default().far_field)]
     pub(crate) far_field: f64,
     /// Estimated relative error at which the solver stops: the relative residual divided by
-    /// 1 − ρ̂ (ρ̂: largest reflectance × row sum), so stiff scenes do not stop early.
-    #[arg(long, default_value_t = SolverParams::default().tolerance)]
-    pub(crate) tolerance: f64,
+    /// 1 − ρ̂ (ρ̂: largest reflectance × row sum), so stiff scenes do not stop early. Default
+    /// 1e-4; 1e-3 for --method gpu-hemicube, whose estimate is the light map's remaining
+    /// relative change (its texels' error is larger than that).
+    #[arg(long)]
+    pub(crate) tolerance: Option<f64>,
     /// Stop solving after this many seconds, converged or not.
     #[arg(long)]
     pub(crate) time_limit: Option<f64>,
@@ -278,7 +280,9 @@ impl SolveArgs {
         );
         p.ff.sky_rays = self.sky_rays;
         p.solver = solver;
-        p.solver_params.tolerance = self.tolerance;
+        if let Some(t) = self.tolerance {
+            p.solver_params.tolerance = t;
+        }
         p.solver_params.max_direct = self.max_direct;
         if let Some(t) = self.time_limit {
             anyhow::ensure!(
