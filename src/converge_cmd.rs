@@ -252,13 +252,14 @@ fn gpu_curve(
         );
         return Ok(());
     };
-    let samples = match crate::gather_cmd::curve(scene, &args.solve, rows, time_limit) {
-        Ok(s) => s,
-        Err(e) => {
-            println!("{label}: skipped: {e}");
-            return Ok(());
-        }
-    };
+    let samples =
+        match crate::gather_cmd::curve(scene, &args.solve, rows, time_limit, args.memory_limit) {
+            Ok(s) => s,
+            Err(e) => {
+                println!("{label}: skipped: {e}");
+                return Ok(());
+            }
+        };
     for s in &samples {
         let e = s.error.unwrap_or_default();
         let _ = writeln!(

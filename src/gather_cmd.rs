@@ -27,7 +27,9 @@ pub struct Sample {
 }
 
 /// The gather's parameters from the shared solve options.
-/// `memory_limit` (`--memory-limit`) bounds the hemicubes kept between sweeps: at most half of it.
+/// `memory_limit` (`--memory-limit`, a budget of host memory) can only lower what the gather
+/// keeps between sweeps: at most half of it, and never more than the default (kept hemicubes
+/// live in GPU memory, which a host budget does not size).
 fn params(
     solve: &SolveArgs,
     texel_density: Option<f64>,
@@ -40,7 +42,7 @@ fn params(
         texel_density,
         page_side: page,
         tolerance: solve.tolerance.unwrap_or(defaults.tolerance),
-        keep_bytes: memory_limit.map_or(defaults.keep_bytes, |l| l / 2),
+        keep_bytes: memory_limit.map_or(defaults.keep_bytes, |l| (l / 2).min(defaults.keep_bytes)),
         ..defaults
     }
 }
@@ -196,8 +198,9 @@ pub fn curve(
     solve: &SolveArgs,
     reference: &[(String, [f64; 3])],
     time_limit: f64,
+    memory_limit: Option<u64>,
 ) -> anyhow::Result<Vec<Sample>> {
-    let params = params(solve, None, 2048, None);
+    let params = params(solve, None, 2048, memory_limit);
     let (_, samples, _) = run_gather(scene, &params, Some(reference), Some(time_limit), |_| {})?;
     Ok(samples)
 }

@@ -186,8 +186,9 @@ pub(crate) struct HierarchyArgs {
     pub(crate) hierarchy: Hierarchy,
     /// Memory budget of a clustered bake, e.g. 4G, 512M or bytes (default: 60 % of the
     /// available memory). Over it the bake coarsens, and refuses with an error in the end.
-    /// With --method gpu-hemicube: at most half of it holds hemicubes drawn once and kept
-    /// between sweeps (default 1 GiB); the others are drawn again every sweep.
+    /// With --method gpu-hemicube it can only lower the hemicubes drawn once and kept between
+    /// sweeps (GPU memory, 1 GiB by default): at most half of it; the others are drawn again
+    /// every sweep.
     #[arg(long, value_parser = args::parse_size)]
     pub(crate) memory_limit: Option<u64>,
     /// Visibility samples per link of a clustered bake.
@@ -236,7 +237,8 @@ pub(crate) struct ConvergeArgs {
         default_value = "0.32,0.16,0.08,0.04,0.02,0.01"
     )]
     pub(crate) refinements: Vec<f64>,
-    /// Memory budget of each clustered bake (as `bake --memory-limit`).
+    /// Memory budget of each clustered bake, and a bound on the GPU gather's kept hemicubes
+    /// (as `bake --memory-limit`).
     #[arg(long, value_parser = args::parse_size)]
     pub(crate) memory_limit: Option<u64>,
     /// Seconds between error samples.

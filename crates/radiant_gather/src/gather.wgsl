@@ -16,7 +16,8 @@ struct Receiver {
     t: vec4<f32>,
     b: vec4<f32>,
     n: vec4<f32>,
-    // Incident radiance from punctual lights (irradiance / π), added to every gather.
+    // Incident radiance from punctual lights (irradiance / π) and, when they are lit in closed
+    // form, from the emitters: added to every gather.
     direct: vec4<f32>,
     // Light-map texel: x, y, page.
     texel: vec4<u32>,
@@ -212,7 +213,7 @@ fn seed_cs(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 // One workgroup per receiver: Σ ΔF · L over its cell (ΔF from the multiplier buffer, laid out
-// as a cell), then H = direct + Σ into the next map.
+// as a cell); H = direct + Σ (stepped with ω) into `gathered`, B = E + ρ H into the next map.
 @compute @workgroup_size(8)
 fn reduce_cs(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_index) li: u32) {
     let cell = group.x;
@@ -222,18 +223,21 @@ fn reduce_cs(@builtin(workgroup_id) group: vec3<u32>, @builtin(local_invocation_
     let x0 = (cell % params.cols) * w;
     let y0 = (cell / params.cols) * res;
     var sum = vec3<f32>(0.0);
-    for (var py = 0u; py < res; py++) {
-        for (var px = li; px < w; px += GROUP) {
-            let id = textureLoad(hemicubes, vec2<u32>(x0 + px, y0 + py), 0).xy;
-            // Branch-free but for the sky: B where a surface is seen (a back face's id samples
-            // a layer it clamps to, and shows black), else the sky.
-            let b = textureSampleLevel(light_map, light_sampler, unpack2x16unorm(id.x), id.y - 1u, 0.0).rgb;
-            var l = select(vec3<f32>(0.0), b, id.y != 0u && id.y != BACK);
-            if params.sky_kind != 0u && id.y == 0u {
-                l = sky(pixel_direction(px, py, rc));
-            }
-            sum += multipliers[py * w + px] * l;
+    let layers = textureNumLayers(light_map);
+    // Flat over the cell's pixels, so every invocation has work whatever R.
+    for (var k = li; k < w * res; k += GROUP) {
+        let px = k % w;
+        let py = k / w;
+        let id = textureLoad(hemicubes, vec2<u32>(x0 + px, y0 + py), 0).xy;
+        // Branch-free but for the sky: B where a surface is seen; the sky's and a back face's
+        // ids sample some page (clamped into range) and show black.
+        let page = min(id.y - 1u, layers - 1u);
+        let b = textureSampleLevel(light_map, light_sampler, unpack2x16unorm(id.x), page, 0.0).rgb;
+        var l = select(vec3<f32>(0.0), b, id.y != 0u && id.y != BACK);
+        if params.sky_kind != 0u && id.y == 0u {
+            l = sky(pixel_direction(px, py, rc));
         }
+        sum += multipliers[k] * l;
     }
     partial[li] = sum;
     workgroupBarrier();

@@ -1,10 +1,11 @@
-//! The GPU half of the gather: buffers, the two light maps, the hemicube atlases, pipelines, and
-//! one sweep as one command buffer.
+//! The GPU half of the gather: buffers, the two radiosity maps, the hemicube atlases,
+//! pipelines, and one sweep as one command buffer.
 //!
-//! A hemicube pixel holds what it sees (light-map coordinates, page and material), not a colour,
-//! so a receiver's hemicube, which does not change between sweeps, is drawn once and kept: each
-//! later sweep is only the reduction, which looks the current light map up. Batches whose ids
-//! do not fit [`Setup::keep_bytes`] are drawn again every sweep into one shared atlas.
+//! A hemicube pixel holds what it sees (light-map coordinates and page), not a colour, so a
+//! receiver's hemicube, which does not change between sweeps, is drawn once and kept: each
+//! later sweep is only the reduction (one compute pass per batch), which looks the current
+//! radiosity map up. Batches whose ids do not fit [`Setup::keep_bytes`] are drawn again every
+//! sweep into one shared atlas.
 
 use bytemuck::{Pod, Zeroable};
 use glam::DVec3;
@@ -17,18 +18,16 @@ use wgpu::util::DeviceExt;
 
 use crate::{Frame, GatherError};
 
-/// The light maps hold f32 where the adapter filters it, else half floats; what a pixel sees is
-/// f32 too. (With half floats a stiff furnace, ρ = 0.9, stalled 0.8 % short of its fixed point:
+/// The radiosity maps hold f32 where the adapter filters it, else half floats. (With half floats a stiff furnace, ρ = 0.9, stalled 0.8 % short of its fixed point:
 /// once a sweep's increment fell below half a unit in the last place, nothing changed.)
 const MAP_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 const MAP_FORMAT_HALF: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
-/// What a hemicube pixel sees (`gather.wgsl`): x the light-map coordinates (two unorm16), y the
-/// page (8 bits) over the material + 1 (24 bits); 0 nothing (the sky), all ones a back face.
+/// What a hemicube pixel sees (`gather.wgsl`): x the light-map coordinates (two unorm16: steps
+/// of 1/8 texel on the largest page, 8192), y the page + 1; y = 0 nothing (the sky), all ones a
+/// back face.
 const ID_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rg32Uint;
 /// Bytes of one hemicube pixel's id.
 pub(crate) const ID_BYTES: u64 = 8;
-/// Pages the ids can name.
-const MAX_PAGES: u32 = 255;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 /// Widest hemicube atlas (pixels); a batch fills it with cells of 3R × R.
 const ATLAS_SIDE: u32 = 4096;
@@ -145,7 +144,7 @@ pub(crate) struct Gpu {
     sweep_uniform: wgpu::Buffer,
     readback: wgpu::Buffer,
     receivers: usize,
-    /// Which light map the next sweep reads (it writes the other).
+    /// Which radiosity map the next sweep reads (it writes the other).
     parity: usize,
 }
 
@@ -201,10 +200,14 @@ impl Gpu {
         let per_batch = (cols * rows_max).min(device.limits().max_compute_workgroups_per_dimension);
         let atlas_w = cols * 3 * res;
         let (pages, mw, mh) = (s.atlas.pages.max(1), s.atlas.width, s.atlas.height);
-        if pages > device.limits().max_texture_array_layers.min(MAX_PAGES)
-            || mw > limit
-            || mh > limit
-        {
+        if pages > device.limits().max_texture_array_layers {
+            return Err(GatherError::InvalidSetting {
+                field: "light-map pages",
+                value: f64::from(pages),
+                range: "at most the adapter's texture array layers",
+            });
+        }
+        if mw > limit || mh > limit {
             return Err(GatherError::InvalidSetting {
                 field: "light-map page side",
                 value: f64::from(mw.max(mh)),
@@ -259,8 +262,9 @@ impl Gpu {
                 })
                 .create_view(&Default::default())
         };
-        // Batches in order, each kept with its own ids while they fit `keep_bytes`; the rest
-        // are drawn every sweep into one shared atlas.
+        // Batches in order, each kept with its own ids if they fit what is left of
+        // `keep_bytes` (the batch's whole atlas counts, empty cells too); the rest are drawn
+        // every sweep into one shared atlas (not counted, nor are the depth buffers).
         let counts: Vec<u32> = (0..n)
             .step_by(per_batch as usize)
             .map(|first| (n - first).min(per_batch))
@@ -600,7 +604,7 @@ impl Gpu {
     }
 
     /// One sweep: every batch's hemicubes (drawn now unless kept from an earlier sweep)
-    /// reduced with the current light map into the other; returns the new `H` per receiver.
+    /// reduced with the current radiosity map into the other; returns the new `H` per receiver.
     /// `omega` weighs the step: `H ← ω J(H) + (1 − ω) H_older` (`J` the Jacobi sweep, `H_older`
     /// the sweep before last); 1 is the plain Jacobi sweep.
     pub(crate) fn sweep(&mut self, omega: f32) -> Result<Vec<[f32; 3]>, GatherError> {
@@ -688,7 +692,7 @@ fn reduce_group(device: wgpu::DeviceType) -> u32 {
     }
 }
 
-/// `gather.wgsl` with the light map's storage format and the reduction's workgroup size.
+/// `gather.wgsl` with the radiosity maps' storage format and the reduction's workgroup size.
 fn shader(map_format: wgpu::TextureFormat, group: u32) -> String {
     let format = if map_format == MAP_FORMAT {
         "rgba32float"
@@ -734,7 +738,9 @@ mod tests {
     fn the_shader_parses_and_validates() {
         for (format, group) in [(MAP_FORMAT, 8), (MAP_FORMAT_HALF, 64)] {
             let source = shader(format, group);
+            // Both substitutions took: the reduction's array and its workgroup agree.
             assert!(source.contains(&format!("@workgroup_size({group})")));
+            assert!(source.contains(&format!("const GROUP: u32 = {group}u;")));
             let module = naga::front::wgsl::parse_str(&source).expect("parse");
             naga::valid::Validator::new(
                 naga::valid::ValidationFlags::all(),

@@ -22,15 +22,16 @@
 //! a reversed infinite depth (the near plane just above the receiver, which sits a hair above
 //! its surface, so its own surface is never seen). A pixel holds what it sees, the light-map
 //! coordinates and page there, or a back face (black: surfaces are one-sided), or nothing
-//! (the sky). That does not change between sweeps, so a batch is drawn once and kept while the
-//! kept ids fit [`GatherParams::keep_bytes`]; each sweep is then one compute pass, which
-//! samples the current radiosity map `B` at each pixel (bilinearly, as a fragment would),
+//! (the sky). That does not change between sweeps, so a batch is drawn once and kept if its
+//! ids fit what is left of [`GatherParams::keep_bytes`]; each sweep is then one compute pass
+//! per batch, which samples the current radiosity map `B` at each pixel (bilinearly, as a fragment would),
 //! weights it by the pixel's delta form factor (the multiplier buffer), sums each cell in one
 //! workgroup, and writes the receiver's `H` into a buffer read back for the convergence test
 //! and its `B = E + ρ H` into the next radiosity map (ping-pong, so the sweep is Jacobi). On
-//! the Cornell box on lavapipe, the first sweep (drawing) takes about 1 s and each later one
-//! about 0.2 s, against 1.7 s per sweep when every sweep drew colours. The gather is a
-//! form-factor-free mode: no links, nothing stored per pair.
+//! the Cornell box on lavapipe at 100 texels per metre, the first sweep (drawing) takes about
+//! 1 s and each later one about 0.14 s, against 1.7 s per sweep when every sweep drew colours.
+//! After [`PLAIN_SWEEPS`] sweeps, Chebyshev acceleration ([`GatherParams::acceleration`]). The
+//! gather is a form-factor-free mode: no links, nothing stored per pair.
 //!
 //! Not drawn as the bake has them (documented limits): alpha masks (masked surfaces are
 //! opaque), textures' variation within a surface (each surface shows its mean reflectance and
@@ -53,9 +54,8 @@ use radiant_visibility::{Bvh, Visibility};
 /// Chart texels the automatic texel density aims at. Once the emitters are lit in closed form
 /// and texels are weighed by what they cover, the gather's error on the Cornell box comes
 /// mostly from the texels' size, not from the hemicubes' pixels: on lavapipe, 10 000 texels
-/// (about 70 per metre) at 16² hemicubes are 0.23 % from Mitsuba in 1.4 s; 5 000 (50 per
-/// metre) 0.35 % in 0.9 s, where the per-point error is larger (2.1 % mean at the Mitsuba
-/// points, against 0.5 %).
+/// (72 per metre) at 16² hemicubes are 0.30 % from Mitsuba in 1.3 s (0.86 % mean at the 24
+/// Mitsuba points); 5 000 (50 per metre) 0.36 % in 0.8 s, where the points are 2.1 % off.
 pub const DEFAULT_TEXELS: f64 = 10000.0;
 
 /// The CPU methods to name when there is no GPU.
@@ -82,24 +82,30 @@ pub struct GatherParams {
     /// emissive triangles.
     pub analytic_emitters: bool,
     /// At most this many bytes of hemicube pixels kept between sweeps. A pixel holds what it
-    /// sees ([`ID_BYTES`] each), which does not change between sweeps, so the receivers whose
-    /// hemicubes are kept are drawn once and only reduced with the current light map
-    /// afterwards; the others are drawn again every sweep. 0 draws every sweep.
+    /// sees ([`ID_BYTES`] each), which does not change between sweeps, so the batches of
+    /// receivers whose hemicubes are kept are drawn once and only reduced with the current
+    /// radiosity map afterwards; the others are drawn again every sweep into one shared atlas
+    /// (not counted here, nor are the depth buffers). 0 draws every sweep.
     pub keep_bytes: u64,
     /// Chebyshev acceleration: after [`PLAIN_SWEEPS`] plain Jacobi sweeps, each sweep steps to
     /// `ω J(H) + (1 − ω) H_older` (`H_older` the sweep before last) with the Chebyshev weights
     /// for the spectral radius the plain sweeps showed (the ratio of their last two absolute
-    /// changes, at most the largest reflectance). The radiosity operator's eigenvalues are real and
-    /// below 1, so this converges whatever that estimate, fastest when it is right. `false`:
-    /// Jacobi sweeps as the notes write them.
+    /// changes, at most the largest reflectance). The radiosity operator's eigenvalues are real
+    /// and below 1 (it is similar to a symmetric matrix), so this converges whatever that
+    /// estimate, fastest when it is right; the hemicubes' discrete operator is only nearly
+    /// reciprocal, so should the change grow [`CHEBYSHEV_GIVE_UP`] sweeps running, the gather
+    /// goes back to plain sweeps. `false`: Jacobi sweeps as the notes write them.
     pub acceleration: bool,
 }
 
 /// Plain Jacobi sweeps before [`GatherParams::acceleration`] starts.
 pub const PLAIN_SWEEPS: u32 = 3;
 
-/// Bytes of one kept hemicube pixel ([`GatherParams::keep_bytes`]): a receiver at resolution
-/// `R` keeps `3 R²` pixels.
+/// Accelerated sweeps running whose change grows before the gather goes back to plain ones.
+pub const CHEBYSHEV_GIVE_UP: u32 = 3;
+
+/// Bytes of one kept hemicube pixel ([`GatherParams::keep_bytes`]): a batch keeps `3R × R`
+/// pixels per cell of its atlas.
 pub const ID_BYTES: u64 = gpu::ID_BYTES;
 
 /// Shadow rays from a receiver to each emissive triangle ([`GatherParams::analytic_emitters`]).
@@ -213,13 +219,7 @@ pub struct GpuGather {
     params: GatherParams,
     iterations: u32,
     last_change: Option<f64>,
-    /// The absolute L1 changes of the last two sweeps (the older first): their ratio
-    /// estimates the spectral radius.
-    diffs: [f64; 2],
-    /// The Chebyshev step's spectral radius estimate and last weight, once it has started.
-    chebyshev: Option<(f64, f64)>,
-    /// The largest reflectance a receiver has: a bound on the spectral radius.
-    max_reflectance: f64,
+    steps: Chebyshev,
     setup_seconds: f64,
 }
 
@@ -387,40 +387,15 @@ impl GpuGather {
             params: params.clone(),
             iterations: 0,
             last_change: None,
-            diffs: [0.0; 2],
-            chebyshev: None,
-            max_reflectance,
+            steps: Chebyshev::new(params.acceleration, max_reflectance),
             setup_seconds: start.elapsed().as_secs_f64(),
         })
-    }
-
-    /// The next sweep's step weight: 1 (Jacobi) for the first [`PLAIN_SWEEPS`] or without
-    /// acceleration, then the Chebyshev semi-iteration's `ω₂ = 1 / (1 − β²/2)`,
-    /// `ωₖ₊₁ = 1 / (1 − β² ωₖ / 4)`, started from the last plain sweep.
-    fn next_omega(&mut self) -> f64 {
-        if !self.params.acceleration || self.iterations < PLAIN_SWEEPS {
-            return 1.0;
-        }
-        let (beta, omega) = match self.chebyshev {
-            Some((beta, w)) => (beta, 1.0 / (1.0 - beta * beta * w / 4.0)),
-            None => {
-                let [a, b] = self.diffs;
-                let beta = if a > 0.0 && b >= 0.0 {
-                    (b / a).min(self.max_reflectance).min(0.999)
-                } else {
-                    0.0
-                };
-                (beta, 1.0 / (1.0 - beta * beta / 2.0))
-            }
-        };
-        self.chebyshev = Some((beta, omega));
-        omega
     }
 
     /// One sweep over every receiver (Jacobi, or its Chebyshev acceleration).
     pub fn step(&mut self) -> Result<Step, GatherError> {
         let start = Instant::now();
-        let omega = self.next_omega();
+        let omega = self.steps.omega(self.iterations);
         let new = self.gpu.sweep(omega as f32)?;
         self.iterations += 1;
         let (mut diff, mut total) = (0.0f64, 0.0f64);
@@ -445,7 +420,7 @@ impl GpuGather {
             }
             _ => change,
         };
-        self.diffs = [self.diffs[1], diff];
+        self.steps.observe(diff, change);
         self.last_change = Some(change);
         Ok(Step {
             iterations: self.iterations,
@@ -606,6 +581,79 @@ impl GpuGather {
         let h = bilinear(&map, self.atlas.page[i], q.x, q.y);
         let t = &self.triangles[i];
         Some(std::array::from_fn(|c| t.emission[c] + t.rho[c] * h[c]))
+    }
+}
+
+/// The sweeps' step weights ([`GatherParams::acceleration`]).
+#[derive(Clone, Debug)]
+struct Chebyshev {
+    /// Whether the sweeps are (still) accelerated.
+    accelerate: bool,
+    /// The largest reflectance a receiver has: a bound on the spectral radius.
+    max_reflectance: f64,
+    /// The absolute L1 changes of the last two sweeps (the older first): their ratio
+    /// estimates the spectral radius.
+    diffs: [f64; 2],
+    /// The last relative change.
+    last: Option<f64>,
+    /// The spectral radius estimate and the last weight, once the acceleration has started.
+    started: Option<(f64, f64)>,
+    /// Accelerated sweeps running whose change grew.
+    growing: u32,
+}
+
+impl Chebyshev {
+    fn new(accelerate: bool, max_reflectance: f64) -> Self {
+        Self {
+            accelerate,
+            max_reflectance,
+            diffs: [0.0; 2],
+            last: None,
+            started: None,
+            growing: 0,
+        }
+    }
+
+    /// The weight of the sweep after `done` sweeps: 1 (Jacobi) for the first [`PLAIN_SWEEPS`]
+    /// or without acceleration, then the Chebyshev semi-iteration's `ω₂ = 1 / (1 − β²/2)`,
+    /// `ωₖ₊₁ = 1 / (1 − β² ωₖ / 4)`, started from the last plain sweep.
+    fn omega(&mut self, done: u32) -> f64 {
+        if !self.accelerate || done < PLAIN_SWEEPS {
+            return 1.0;
+        }
+        let (beta, omega) = match self.started {
+            Some((beta, w)) => (beta, 1.0 / (1.0 - beta * beta * w / 4.0)),
+            None => {
+                let [a, b] = self.diffs;
+                let beta = if a > 0.0 && b >= 0.0 {
+                    (b / a).min(self.max_reflectance).min(0.999)
+                } else {
+                    0.0
+                };
+                (beta, 1.0 / (1.0 - beta * beta / 2.0))
+            }
+        };
+        self.started = Some((beta, omega));
+        omega
+    }
+
+    /// A sweep's absolute and relative L1 change. Should the change of accelerated sweeps grow
+    /// [`CHEBYSHEV_GIVE_UP`] sweeps running, the later sweeps are plain.
+    fn observe(&mut self, diff: f64, change: f64) {
+        self.diffs = [self.diffs[1], diff];
+        if self.accelerate && self.started.is_some() {
+            let grew = self.last.is_some_and(|last| change > last);
+            self.growing = if grew { self.growing + 1 } else { 0 };
+            if self.growing >= CHEBYSHEV_GIVE_UP {
+                tracing::warn!(
+                    "gpu-hemicube: the accelerated sweeps' change grew {} sweeps running; going on with plain sweeps",
+                    self.growing
+                );
+                self.accelerate = false;
+                self.started = None;
+            }
+        }
+        self.last = Some(change);
     }
 }
 
@@ -808,7 +856,6 @@ fn basis(n: DVec3) -> (DVec3, DVec3) {
     )
 }
 
-/// The receivers as the GPU reads them: frame, lifted centre, texel and punctual light.
 /// An emissive triangle lit in closed form (local frame).
 struct Emitter {
     v: [DVec3; 3],
@@ -854,6 +901,8 @@ fn emitter_light(vis: &dyn Visibility, x: DVec3, n: DVec3, e: &Emitter, seed: u6
     e.emission.map(|c| c * f)
 }
 
+/// The receivers as the GPU reads them: frame, lifted centre, texel, material and direct
+/// light.
 fn gpu_receivers(
     scene: &Scene,
     frame: &Frame,
@@ -963,6 +1012,49 @@ mod tests {
             let (t, b) = basis(n);
             assert!((t.cross(b) - n).length() < 1e-12, "{n}");
             assert!(t.dot(n).abs() < 1e-12 && b.dot(n).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn the_chebyshev_weights_follow_the_recurrence_and_give_up_when_the_change_grows() {
+        // Plain sweeps first; then β from the last two absolute changes (0.5 here, under the
+        // largest reflectance 0.8), ω₂ = 1 / (1 − β²/2), ωₖ₊₁ = 1 / (1 − β² ωₖ / 4).
+        let mut c = Chebyshev::new(true, 0.8);
+        for (done, diff) in [(0, 4.0), (1, 2.0), (2, 1.0)] {
+            assert_eq!(c.omega(done), 1.0);
+            c.observe(diff, diff / 10.0);
+        }
+        let w2 = c.omega(3);
+        assert!((w2 - 1.0 / (1.0 - 0.125)).abs() < 1e-12, "{w2}");
+        c.observe(0.3, 0.03);
+        let w3 = c.omega(4);
+        assert!((w3 - 1.0 / (1.0 - 0.25 * w2 / 4.0)).abs() < 1e-12, "{w3}");
+        // The limit 2 / (1 + √(1 − β²)).
+        let mut w = w3;
+        for done in 5..60 {
+            c.observe(0.01, 0.001);
+            w = c.omega(done);
+        }
+        assert!((w - 2.0 / (1.0 + 0.75f64.sqrt())).abs() < 1e-9, "{w}");
+        // β is capped by the largest reflectance.
+        let mut capped = Chebyshev::new(true, 0.3);
+        for (done, diff) in [(0, 1.0), (1, 0.9), (2, 0.81)] {
+            capped.omega(done);
+            capped.observe(diff, diff);
+        }
+        assert!((capped.omega(3) - 1.0 / (1.0 - 0.09 / 2.0)).abs() < 1e-12);
+        // Growing three accelerated sweeps running: plain sweeps from then on.
+        for (k, change) in [0.2, 0.3, 0.4].into_iter().enumerate() {
+            assert!(c.omega(60 + k as u32) > 1.0);
+            c.observe(change, change);
+        }
+        assert_eq!(c.omega(63), 1.0);
+        assert_eq!(c.omega(64), 1.0);
+        // Without acceleration every weight is 1.
+        let mut plain = Chebyshev::new(false, 0.8);
+        for done in 0..10 {
+            assert_eq!(plain.omega(done), 1.0);
+            plain.observe(1.0 / f64::from(done + 1), 0.1);
         }
     }
 
