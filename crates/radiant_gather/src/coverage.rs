@@ -15,6 +15,22 @@ use glam::DVec2;
 /// winding): its area and centroid, or `None` when they do not overlap (or the triangle is
 /// degenerate).
 pub(crate) fn clip_texel(x: f64, y: f64, uv: [DVec2; 3]) -> Option<(f64, DVec2)> {
+    let poly = clip_polygon(x, y, uv)?;
+    // Shoelace area and centroid.
+    let (mut area2, mut c) = (0.0, DVec2::ZERO);
+    for i in 0..poly.len() {
+        let (p, q) = (poly[i], poly[(i + 1) % poly.len()]);
+        let cross = p.perp_dot(q);
+        area2 += cross;
+        c += (p + q) * cross;
+    }
+    let area = 0.5 * area2;
+    (area > 1e-12 && area.is_finite()).then(|| (area, c / (3.0 * area2)))
+}
+
+/// The polygon (counter-clockwise) of the part of the unit texel square at `(x, y)` inside the
+/// triangle `uv`, or `None` when it has fewer than three corners.
+pub(crate) fn clip_polygon(x: f64, y: f64, uv: [DVec2; 3]) -> Option<Vec<DVec2>> {
     let signed = (uv[1] - uv[0]).perp_dot(uv[2] - uv[0]);
     if signed.is_nan() || signed.abs() < 1e-18 {
         return None;
@@ -52,16 +68,7 @@ pub(crate) fn clip_texel(x: f64, y: f64, uv: [DVec2; 3]) -> Option<(f64, DVec2)>
             return None;
         }
     }
-    // Shoelace area and centroid.
-    let (mut area2, mut c) = (0.0, DVec2::ZERO);
-    for i in 0..poly.len() {
-        let (p, q) = (poly[i], poly[(i + 1) % poly.len()]);
-        let cross = p.perp_dot(q);
-        area2 += cross;
-        c += (p + q) * cross;
-    }
-    let area = 0.5 * area2;
-    (area > 1e-12 && area.is_finite()).then(|| (area, c / (3.0 * area2)))
+    Some(poly)
 }
 
 /// Barycentric weights `(u, v)` of the second and third vertex of `uv` at `p`.

@@ -33,16 +33,20 @@
 //! After [`PLAIN_SWEEPS`] sweeps, Chebyshev acceleration ([`GatherParams::acceleration`]). The
 //! gather is a form-factor-free mode: no links, nothing stored per pair.
 //!
+//! A texel of a surface with a base-colour texture reflects the texture's mean over the part
+//! of it on its triangle (relative to the image's mean, as the bake's elements), so what it
+//! writes into the radiosity map, and so what every hemicube sees of it, shows the texture.
+//!
 //! Not drawn as the bake has them (documented limits): alpha masks (masked surfaces are
-//! opaque), textures' variation within a surface (each surface shows its mean reflectance and
-//! emission), image skies (refused), dynamic surfaces (left out, as by the bake).
+//! opaque), emissive textures (an emitter shows its mean emission), image skies (refused),
+//! dynamic surfaces (left out, as by the bake).
 
 mod coverage;
 mod gpu;
 
 use std::time::Instant;
 
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 use radiant_radiosity::Rgb;
 use radiant_radiosity::lightmap::LightMap;
 use radiant_radiosity::metrics::SurfaceMean;
@@ -213,6 +217,8 @@ pub struct GpuGather {
     h: Vec<[f32; 3]>,
     /// Which receivers cover each triangle, and how much.
     coverage: coverage::Coverage,
+    /// Per receiver: the reflectance its texel shows (textures' footprints included).
+    reflectance: Vec<Rgb>,
     /// Per scene triangle: reflectance and emission (of its surface), area, surface, static.
     triangles: Vec<TriangleInfo>,
     surfaces: Vec<(String, bool)>,
@@ -297,7 +303,8 @@ impl GpuGather {
                 }
             })
             .collect();
-        let receivers = receivers(&atlas, scene, &baked);
+        let footprints = texel_footprints(&atlas);
+        let receivers = receivers(&atlas, scene, &baked, &footprints);
         if receivers.is_empty() {
             return Err(GatherError::NoGeometry);
         }
@@ -309,7 +316,7 @@ impl GpuGather {
                 at[t.page as usize * page + (t.y * atlas.width + t.x) as usize] = k as u32;
             }
             coverage::Coverage::new(
-                &texel_footprints(&atlas),
+                &footprints,
                 &atlas.page,
                 &baked,
                 (atlas.width, atlas.height),
@@ -336,7 +343,16 @@ impl GpuGather {
             .collect();
         let analytic = params.analytic_emitters && emitters.len() <= ANALYTIC_EMITTERS;
         let emitters = if analytic { &emitters[..] } else { &[] };
-        let gpu_receivers = gpu_receivers(scene, &frame, &receivers, &baked, emitters, !analytic);
+        let reflectance = receiver_reflectance(scene, &footprints, &receivers);
+        let gpu_receivers = gpu_receivers(
+            scene,
+            &frame,
+            &receivers,
+            &reflectance,
+            &baked,
+            emitters,
+            !analytic,
+        );
         let max_reflectance = gpu_receivers
             .iter()
             .flat_map(|r| r.reflectance[..3].iter().map(|&c| f64::from(c)))
@@ -378,6 +394,7 @@ impl GpuGather {
             receivers,
             h: vec![[0.0; 3]; n],
             coverage,
+            reflectance,
             triangles,
             surfaces: scene
                 .surfaces
@@ -503,8 +520,15 @@ impl GpuGather {
         reason = "RGB channels index three arrays at once"
     )]
     pub fn surface_means(&self) -> Vec<SurfaceMean> {
+        // What each texel reflects, ρ H, its ρ its own (a texture's footprint).
+        let reflected: Vec<[f32; 3]> = self
+            .h
+            .iter()
+            .zip(&self.reflectance)
+            .map(|(h, rho)| std::array::from_fn(|c| (rho[c] * f64::from(h[c])) as f32))
+            .collect();
         let mut per_tri = vec![([0.0f64; 3], 0u32, [0.0f64; 3], 0u32); self.triangles.len()];
-        for (r, h) in self.receivers.iter().zip(&self.h) {
+        for (r, h) in self.receivers.iter().zip(&reflected) {
             let e = &mut per_tri[r.texel.triangle as usize];
             let (sum, count) = if r.texel.inside {
                 (&mut e.0, &mut e.1)
@@ -521,8 +545,8 @@ impl GpuGather {
             if !(t.baked && t.area > 0.0 && t.area.is_finite()) {
                 continue;
             }
-            let h = match self.coverage.mean(i, &self.h) {
-                Some(h) => h,
+            let reflected = match self.coverage.mean(i, &reflected) {
+                Some(v) => v,
                 None if *ni > 0 => inside.map(|v| v / f64::from(*ni)),
                 None if *nr > 0 => ring.map(|v| v / f64::from(*nr)),
                 None => continue,
@@ -530,7 +554,7 @@ impl GpuGather {
             let a = &mut acc[t.surface as usize];
             a.0 += t.area;
             for c in 0..3 {
-                a.1[c] += t.area * (t.emission[c] + t.rho[c] * h[c]);
+                a.1[c] += t.area * (t.emission[c] + reflected[c]);
             }
         }
         self.surfaces
@@ -799,9 +823,13 @@ fn texel_footprints(atlas: &Atlas) -> Vec<[glam::DVec2; 3]> {
 
 /// The texels [`Atlas::fill`] writes on baked triangles, the last writer of each texel kept,
 /// each at the centroid of the part of it on its triangle ([`coverage`]).
-fn receivers(atlas: &Atlas, scene: &Scene, baked: &[bool]) -> Vec<Receiver> {
+fn receivers(
+    atlas: &Atlas,
+    scene: &Scene,
+    baked: &[bool],
+    footprints: &[[glam::DVec2; 3]],
+) -> Vec<Receiver> {
     let texels = atlas.texels(scene);
-    let footprints = texel_footprints(atlas);
     let page = atlas.width as usize * atlas.height as usize;
     let mut last = vec![u32::MAX; page * atlas.pages as usize];
     for (k, t) in texels.iter().enumerate() {
@@ -841,6 +869,90 @@ fn receivers(atlas: &Atlas, scene: &Scene, baked: &[bool]) -> Vec<Receiver> {
                 texel: *t,
                 position,
             }
+        })
+        .collect()
+}
+
+/// Per receiver: its surface's reflectance, and where the surface has a base-colour texture,
+/// that times the texture's mean over the part of the texel on its triangle relative to the
+/// image's mean (as the bake's elements, `radiant_radiosity::input`), clamped to [0, 1].
+fn receiver_reflectance(
+    scene: &Scene,
+    footprints: &[[glam::DVec2; 3]],
+    receivers: &[Receiver],
+) -> Vec<Rgb> {
+    use radiant_scene::texture::Pyramid;
+    use rayon::prelude::*;
+    let surface = |r: &Receiver| {
+        let t = scene.triangles.get(r.texel.triangle as usize)?;
+        Some((t, scene.surfaces.get(t.surface as usize)?))
+    };
+    let mut used = vec![false; scene.images.len()];
+    for r in receivers {
+        if let Some((_, s)) = surface(r)
+            && let Some(t) = &s.base_color_texture
+            && let Some(u) = used.get_mut(t.image as usize)
+        {
+            *u = true;
+        }
+    }
+    let pyramids: Vec<Option<(Pyramid, [f64; 4])>> = scene
+        .images
+        .par_iter()
+        .zip(used)
+        .map(|(img, u)| u.then(|| (Pyramid::new(img), img.mean_linear())))
+        .collect();
+    receivers
+        .par_iter()
+        .with_min_len(256)
+        .map(|r| {
+            let Some((tri, s)) = surface(r) else {
+                return [0.0; 3];
+            };
+            let Some(t) = &s.base_color_texture else {
+                return s.reflectance;
+            };
+            let Some(Some((pyramid, mean))) = pyramids.get(t.image as usize) else {
+                return s.reflectance;
+            };
+            let fp = footprints[r.texel.triangle as usize];
+            let Some(poly) = coverage::clip_polygon(f64::from(r.texel.x), f64::from(r.texel.y), fp)
+            else {
+                return s.reflectance;
+            };
+            // The covered part as a fan of triangles, each's footprint mean weighed by its area.
+            let (mut sum, mut weight) = ([0.0f64; 3], 0.0f64);
+            for k in 1..poly.len() - 1 {
+                let corners = [poly[0], poly[k], poly[k + 1]];
+                let area = 0.5 * (corners[1] - corners[0]).perp_dot(corners[2] - corners[0]);
+                if area.is_nan() || area <= 0.0 {
+                    continue;
+                }
+                let uv = corners.map(|c| {
+                    let (u, v) = coverage::barycentric(fp, c);
+                    let raw: [Vec2; 2] = std::array::from_fn(|set| {
+                        let q = tri.uv[set].map(|p| p.as_dvec2());
+                        (q[0] * (1.0 - u - v) + q[1] * u + q[2] * v).as_vec2()
+                    });
+                    t.uv(raw)
+                });
+                let m = pyramid.footprint_mean(t.sampler, uv);
+                for c in 0..3 {
+                    sum[c] += area * m[c];
+                }
+                weight += area;
+            }
+            if weight.is_nan() || weight <= 0.0 {
+                return s.reflectance;
+            }
+            std::array::from_fn(|c| {
+                let ratio = if mean[c] > 0.0 {
+                    sum[c] / weight / mean[c]
+                } else {
+                    1.0
+                };
+                (s.reflectance[c] * ratio).clamp(0.0, 1.0)
+            })
         })
         .collect()
 }
@@ -907,6 +1019,7 @@ fn gpu_receivers(
     scene: &Scene,
     frame: &Frame,
     receivers: &[Receiver],
+    reflectance: &[Rgb],
     baked: &[bool],
     emitters: &[Emitter],
     draw_emission: bool,
@@ -927,8 +1040,9 @@ fn gpu_receivers(
         .collect();
     receivers
         .par_iter()
+        .zip(reflectance)
         .with_min_len(256)
-        .map(|r| {
+        .map(|(r, rho)| {
             let t = &scene.triangles[r.texel.triangle as usize];
             let [a, b, c] = t.vertices;
             let n = (b - a).cross(c - a).normalize_or_zero();
@@ -984,7 +1098,7 @@ fn gpu_receivers(
                 .filter(|_| draw_emission)
                 .map_or([0.0; 3], |s| s.emission);
             gpu::GpuReceiver {
-                reflectance: rgb(surface.map_or([0.0; 3], |s| s.reflectance)),
+                reflectance: rgb(*rho),
                 emission: rgb(emission),
                 origin: v4(origin),
                 t: v4(tt),

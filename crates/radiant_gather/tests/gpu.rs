@@ -1,6 +1,6 @@
 //! The GPU hemicube gather on a real adapter (lavapipe in CI): closed forms, the furnace, the
-//! lecture's two-patch table, the CPU hemicube's answer on the Cornell box, and hemicubes kept
-//! between sweeps against hemicubes drawn every sweep.
+//! lecture's two-patch table, the CPU hemicube's answer on the Cornell box, hemicubes kept
+//! between sweeps against hemicubes drawn every sweep, and a textured floor against the CPU bake.
 
 use std::f64::consts::PI;
 
@@ -363,4 +363,80 @@ fn hemicubes_drawn_once_give_the_answer_of_hemicubes_drawn_every_sweep() {
     assert_eq!(kept, 0);
     assert!(all.iter().any(|t| t[0] > 0.0));
     assert!(all == first && all == none, "the light maps differ");
+}
+
+#[test]
+fn a_textured_floor_reflects_its_texture_as_the_bake_does() {
+    // A floor whose base colour is white on its left half and black on its right, under a
+    // light over the left half: each texel reflects its texture's footprint, so the floor's
+    // mean radiosity is the CPU bake's (which reads the same footprints per element), far
+    // from what its mean reflectance alone would give.
+    use radiant_radiosity::{Bake, BakeParams};
+    let mut triangles = Vec::new();
+    triangles.extend(quad(DVec3::ZERO, DVec3::Z, DVec3::X, 0)); // faces +y
+    let e = DVec3::new(0.15, 0.3, 0.4);
+    triangles.extend(quad(e, DVec3::X * 0.2, DVec3::Z * 0.2, 1)); // faces -y
+    for t in &mut triangles {
+        t.uv[0] = t.vertices.map(|v| glam::Vec2::new(v.x as f32, v.z as f32));
+    }
+    let mut pixels = Vec::new();
+    for x in 0..8 {
+        let v = if x < 4 { 255u8 } else { 0 };
+        pixels.extend([v, v, v, 255]);
+    }
+    let mut floor = surface("floor", 0.4, 0.0);
+    floor.base_color_texture = Some(radiant_scene::TextureRef {
+        image: 0,
+        sampler: Default::default(),
+        tex_coord: 0,
+        transform: Default::default(),
+    });
+    let textured = Scene {
+        surfaces: vec![floor, surface("light", 0.0, 1.0)],
+        images: vec![radiant_scene::Image {
+            name: "half".into(),
+            width: 8,
+            height: 1,
+            pixels: pixels.into(),
+        }],
+        triangles,
+        ..Scene::default()
+    };
+    let mut params = BakeParams::default();
+    params.mesh.patch_size = 0.04;
+    let cpu = Bake::new(&textured, &params)
+        .expect("cpu bake")
+        .run_to_end(&mut |_| {})
+        .expect("cpu solve");
+    let mean_of = |means: &[radiant_radiosity::metrics::SurfaceMean]| {
+        means
+            .iter()
+            .find(|s| s.name == "floor")
+            .expect("floor")
+            .mean[0]
+    };
+    let want = mean_of(&cpu.surfaces);
+    let gather = |scene: &Scene| {
+        let mut g = GpuGather::with_context(
+            gpu(),
+            scene,
+            &GatherParams {
+                texel_density: Some(40.0),
+                ..GatherParams::default()
+            },
+        )
+        .expect("gather");
+        g.solve(|_| {}).expect("solve");
+        mean_of(&g.surface_means())
+    };
+    let got = gather(&textured);
+    let mut plain = textured.clone();
+    plain.surfaces[0].base_color_texture = None;
+    let untextured = gather(&plain);
+    eprintln!("floor: CPU {want:.5}, GPU {got:.5}, GPU without the texture {untextured:.5}");
+    assert!((got - want).abs() < 0.03 * want, "{got} against {want}");
+    assert!(
+        (untextured - want).abs() > 0.15 * want,
+        "{untextured} against {want}"
+    );
 }
