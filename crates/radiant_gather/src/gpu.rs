@@ -85,6 +85,8 @@ pub(crate) struct Setup<'a> {
     pub atlas: &'a Atlas,
     pub receivers: &'a [GpuReceiver],
     pub vertices: &'a [GpuVertex],
+    /// Three per triangle, into `vertices`.
+    pub indices: &'a [u32],
     pub sky: SkyUniform,
     pub near: f32,
     /// At most this many bytes of hemicube ids kept between sweeps.
@@ -92,27 +94,46 @@ pub(crate) struct Setup<'a> {
 }
 
 /// The baked triangles' vertices in the local frame, with their light-map coordinates.
+///
+/// Indexed: corners with the same position, light-map coordinates and page are one vertex, so
+/// a CPU rasteriser's vertex cache shades a shared corner once per face instead of once per
+/// triangle (every hemicube face runs the vertex stage over the whole scene).
 pub(crate) fn vertices(
     scene: &Scene,
     atlas: &Atlas,
     frame: &Frame,
     baked: &[bool],
-) -> Vec<GpuVertex> {
+) -> (Vec<GpuVertex>, Vec<u32>) {
     let mut out = Vec::with_capacity(scene.triangles.len() * 3);
+    let mut indices = Vec::with_capacity(scene.triangles.len() * 3);
+    let mut seen: std::collections::HashMap<[u32; 6], u32> = std::collections::HashMap::new();
     for (i, t) in scene.triangles.iter().enumerate() {
         if !baked[i] {
             continue;
         }
         for k in 0..3 {
             let p: DVec3 = frame.local(t.vertices[k]);
-            out.push(GpuVertex {
+            let v = GpuVertex {
                 position: [p.x as f32, p.y as f32, p.z as f32],
                 uv: atlas.uv[i][k].to_array(),
                 page: atlas.page[i],
+            };
+            let key = [
+                v.position[0].to_bits(),
+                v.position[1].to_bits(),
+                v.position[2].to_bits(),
+                v.uv[0].to_bits(),
+                v.uv[1].to_bits(),
+                v.page,
+            ];
+            let index = *seen.entry(key).or_insert_with(|| {
+                out.push(v);
+                (out.len() - 1) as u32
             });
+            indices.push(index);
         }
     }
-    out
+    (out, indices)
 }
 
 struct Batch {
@@ -137,7 +158,8 @@ pub(crate) struct Gpu {
     ids: wgpu::RenderPipeline,
     reduce: wgpu::ComputePipeline,
     vertices: wgpu::Buffer,
-    vertex_count: u32,
+    indices: wgpu::Buffer,
+    index_count: u32,
     batches: Vec<Batch>,
     gathered: wgpu::Buffer,
     /// The sweep's step weight ω (`gather.wgsl`'s `Sweep`).
@@ -325,6 +347,11 @@ impl Gpu {
             label: Some("gather_vertices"),
             contents: bytemuck::cast_slice(s.vertices),
             usage: wgpu::BufferUsages::VERTEX,
+        });
+        let indices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("gather_indices"),
+            contents: bytemuck::cast_slice(s.indices),
+            usage: wgpu::BufferUsages::INDEX,
         });
         let out_bytes = u64::from(n.max(1)) * 16;
         let gathered = device.create_buffer(&wgpu::BufferDescriptor {
@@ -578,7 +605,8 @@ impl Gpu {
         Ok(Self {
             ids,
             reduce,
-            vertex_count: s.vertices.len() as u32,
+            index_count: s.indices.len() as u32,
+            indices,
             vertices,
             batches,
             gathered,
@@ -653,8 +681,9 @@ impl Gpu {
                 );
                 pass.set_bind_group(0, &batch.render, &[]);
                 pass.set_vertex_buffer(0, self.vertices.slice(..));
+                pass.set_index_buffer(self.indices.slice(..), wgpu::IndexFormat::Uint32);
                 pass.set_pipeline(&self.ids);
-                pass.draw(0..self.vertex_count, 0..batch.count * 5);
+                pass.draw_indexed(0..self.index_count, 0, 0..batch.count * 5);
             }
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("gather_reduce"),

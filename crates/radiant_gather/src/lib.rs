@@ -357,7 +357,7 @@ impl GpuGather {
             .iter()
             .flat_map(|r| r.reflectance[..3].iter().map(|&c| f64::from(c)))
             .fold(0.0f64, f64::max);
-        let vertices = gpu::vertices(scene, &atlas, &frame, &baked);
+        let (vertices, indices) = gpu::vertices(scene, &atlas, &frame, &baked);
         let sky = match &scene.sky {
             None => gpu::SkyUniform::None,
             Some(Sky::Uniform { radiance }) => gpu::SkyUniform::Uniform(*radiance),
@@ -371,6 +371,7 @@ impl GpuGather {
                 atlas: &atlas,
                 receivers: &gpu_receivers,
                 vertices: &vertices,
+                indices: &indices,
                 sky,
                 near: NEAR,
                 keep_bytes: params.keep_bytes,
