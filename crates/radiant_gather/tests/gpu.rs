@@ -440,3 +440,36 @@ fn a_textured_floor_reflects_its_texture_as_the_bake_does() {
         "{untextured} against {want}"
     );
 }
+
+#[test]
+fn a_furnace_at_reflectance_0_999_converges_with_acceleration() {
+    // The stiff case: a closed cube of reflectance 0.999 emitting 1, B = E / (1 − ρ) = 1000.
+    // Plain Jacobi sweeps would need thousands; the accelerated ones settle within the sweep
+    // limit, without a non-finite value, to within 1 %.
+    let mut triangles = Vec::new();
+    let (o, x, y, z) = (DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z);
+    triangles.extend(quad(o, z, x, 0));
+    triangles.extend(quad(o + y, x, z, 0));
+    triangles.extend(quad(o, x, y, 0));
+    triangles.extend(quad(o + z, y, x, 0));
+    triangles.extend(quad(o, y, z, 0));
+    triangles.extend(quad(o + x, z, y, 0));
+    let scene = Scene {
+        surfaces: vec![surface("walls", 0.999, 1.0)],
+        triangles,
+        ..Scene::default()
+    };
+    let params = GatherParams {
+        resolution: 16,
+        texel_density: Some(8.0),
+        tolerance: 1e-4,
+        max_iterations: 500,
+        ..GatherParams::default()
+    };
+    let mut g = GpuGather::with_context(gpu(), &scene, &params).expect("gather");
+    let last = g.solve(|_| {}).expect("solve");
+    assert!(last.iterations < 500, "did not converge: {last:?}");
+    let mean = g.surface_means()[0].mean[0];
+    eprintln!("{} sweeps, B = {mean}", last.iterations);
+    assert!((mean - 1000.0).abs() < 10.0, "{mean}");
+}
