@@ -54,6 +54,8 @@ struct VsIn {
     @location(0) position: vec3<f32>,
     @location(1) uv: vec2<f32>,
     @location(2) page: u32,
+    @location(3) tex: vec2<f32>,
+    @location(4) mask: u32,
 }
 
 struct VsOut {
@@ -61,12 +63,16 @@ struct VsOut {
     @builtin(clip_distances) clip_distances: array<f32, 4>,
     @location(0) uv: vec2<f32>,
     @location(1) @interpolate(flat) page: u32,
+    @location(2) tex: vec2<f32>,
+    @location(3) @interpolate(flat) mask: u32,
 }
 
 // What the fragment stage reads of VsOut (clip distances are the vertex stage's only).
 struct FsIn {
     @location(0) uv: vec2<f32>,
     @location(1) @interpolate(flat) page: u32,
+    @location(2) tex: vec2<f32>,
+    @location(3) @interpolate(flat) mask: u32,
 }
 
 // Face `face` of a hemicube with frame (t, b, n): forward, right and up, right × up = -forward.
@@ -124,12 +130,81 @@ fn hemicube_vs(v: VsIn, @builtin(instance_index) instance: u32) -> VsOut {
     out.clip = vec4<f32>(ax * x + bx * w, ay * y + by * w, params.near, w);
     out.uv = v.uv;
     out.page = v.page;
+    out.tex = v.tex;
+    out.mask = v.mask;
     return out;
 }
 
 // What a pixel sees: x the light-map coordinates (two unorm16), y the page + 1. A pixel that
 // sees nothing stays 0 (the sky); a back face is BACK (black).
 const BACK: u32 = 0xffffffffu;
+
+// Alpha masks: a masked triangle's fragments below its cutoff are not there (as the CPU bake's
+// rays pass them). The masks' images are their alpha bytes, four to a word, sampled as the
+// glTF sampler says (radiant_scene's `taps`).
+const NO_MASK: u32 = 0xffffffffu;
+
+struct MaskInfo {
+    image: u32,
+    // Wrap along U in bits 0-1, along V in 2-3 (0 repeat, 1 mirrored, 2 clamp); bit 4 nearest.
+    sampler: u32,
+    cutoff: f32,
+    factor: f32,
+}
+
+struct ImageInfo {
+    offset: u32,
+    width: u32,
+    height: u32,
+    pad: u32,
+}
+
+@group(0) @binding(11) var<storage, read> mask_infos: array<MaskInfo>;
+@group(0) @binding(12) var<storage, read> mask_images: array<ImageInfo>;
+@group(0) @binding(13) var<storage, read> mask_alpha: array<u32>;
+
+fn fold(i: i32, n: i32, wrap: u32) -> i32 {
+    switch wrap {
+        case 1u: {
+            let p = 2 * n;
+            let m = ((i % p) + p) % p;
+            return select(m, p - 1 - m, m >= n);
+        }
+        case 2u: { return clamp(i, 0, n - 1); }
+        default: { return ((i % n) + n) % n; }
+    }
+}
+
+fn alpha_texel(img: ImageInfo, x: i32, y: i32) -> f32 {
+    let k = img.offset + u32(y) * img.width + u32(x);
+    let word = mask_alpha[k >> 2u];
+    return f32((word >> ((k & 3u) * 8u)) & 0xffu) / 255.0;
+}
+
+fn mask_alpha_at(m: MaskInfo, uv: vec2<f32>) -> f32 {
+    let img = mask_images[m.image];
+    let w = i32(img.width);
+    let h = i32(img.height);
+    let ws = m.sampler & 3u;
+    let wt = (m.sampler >> 2u) & 3u;
+    let x = uv.x * f32(w) - 0.5;
+    let y = uv.y * f32(h) - 0.5;
+    if (m.sampler & 16u) != 0u {
+        return alpha_texel(img, fold(i32(floor(x + 0.5)), w, ws), fold(i32(floor(y + 0.5)), h, wt));
+    }
+    let x0 = floor(x);
+    let y0 = floor(y);
+    let fx = x - x0;
+    let fy = y - y0;
+    let i0 = fold(i32(x0), w, ws);
+    let i1 = fold(i32(x0) + 1, w, ws);
+    let j0 = fold(i32(y0), h, wt);
+    let j1 = fold(i32(y0) + 1, h, wt);
+    return alpha_texel(img, i0, j0) * (1.0 - fx) * (1.0 - fy)
+        + alpha_texel(img, i1, j0) * fx * (1.0 - fy)
+        + alpha_texel(img, i0, j1) * (1.0 - fx) * fy
+        + alpha_texel(img, i1, j1) * fx * fy;
+}
 
 struct IdOut {
     @location(0) id: vec2<u32>,
@@ -142,6 +217,12 @@ struct IdOut {
 // first.
 @fragment
 fn id_fs(in: FsIn, @builtin(position) position: vec4<f32>, @builtin(front_facing) front: bool) -> IdOut {
+    if in.mask != NO_MASK {
+        let m = mask_infos[in.mask];
+        if m.factor * mask_alpha_at(m, in.tex) < m.cutoff {
+            discard;
+        }
+    }
     var out: IdOut;
     if front {
         out.id = vec2<u32>(pack2x16unorm(in.uv), in.page + 1u);

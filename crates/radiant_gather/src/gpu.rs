@@ -12,8 +12,10 @@ use glam::DVec3;
 use radiant_render::GpuContext;
 use radiant_render::capture::{ReadbackError, read_buffer};
 use radiant_render::util::{storage_entry, storage_rw_entry, uniform_entry};
-use radiant_scene::Scene;
+use std::collections::HashMap;
+
 use radiant_scene::atlas::Atlas;
+use radiant_scene::{AlphaMasks, Scene};
 use wgpu::util::DeviceExt;
 
 use crate::{Frame, GatherError};
@@ -47,13 +49,40 @@ pub(crate) struct GpuReceiver {
     pub emission: [f32; 4],
 }
 
-/// A vertex of a baked triangle (not indexed).
+/// A vertex of a baked triangle.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub(crate) struct GpuVertex {
     position: [f32; 3],
     uv: [f32; 2],
     page: u32,
+    /// The alpha mask's texture coordinates, and the mask ([`NO_MASK`]: opaque).
+    tex: [f32; 2],
+    mask: u32,
+}
+
+/// A vertex of an opaque triangle.
+const NO_MASK: u32 = u32::MAX;
+
+/// An alpha mask as `gather.wgsl` reads it: its image in [`Masks::images`], the sampler
+/// (wrap along U in bits 0–1, along V in 2–3: 0 repeat, 1 mirrored, 2 clamp; bit 4 nearest),
+/// the cutoff and the base colour factor's alpha.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct GpuMask {
+    image: u32,
+    sampler: u32,
+    cutoff: f32,
+    factor: f32,
+}
+
+/// The alpha masks of the drawn triangles: masks, their images (byte offset into `alpha`,
+/// width, height) and the images' alpha bytes, four to a word.
+#[derive(Default)]
+pub(crate) struct Masks {
+    masks: Vec<GpuMask>,
+    images: Vec<[u32; 4]>,
+    alpha: Vec<u8>,
 }
 
 #[repr(C)]
@@ -87,6 +116,8 @@ pub(crate) struct Setup<'a> {
     pub vertices: &'a [GpuVertex],
     /// Three per triangle, into `vertices`.
     pub indices: &'a [u32],
+    /// The alpha masks the vertices name.
+    pub masks: &'a Masks,
     pub sky: SkyUniform,
     pub near: f32,
     /// At most this many bytes of hemicube ids kept between sweeps.
@@ -103,20 +134,65 @@ pub(crate) fn vertices(
     atlas: &Atlas,
     frame: &Frame,
     baked: &[bool],
-) -> (Vec<GpuVertex>, Vec<u32>) {
+    alpha: Option<&AlphaMasks>,
+) -> (Vec<GpuVertex>, Vec<u32>, Masks) {
+    use radiant_scene::texture::Wrap;
     let mut out = Vec::with_capacity(scene.triangles.len() * 3);
     let mut indices = Vec::with_capacity(scene.triangles.len() * 3);
-    let mut seen: std::collections::HashMap<[u32; 6], u32> = std::collections::HashMap::new();
-    for (i, t) in scene.triangles.iter().enumerate() {
+    let mut seen: HashMap<[u32; 9], u32> = HashMap::new();
+    let mut masks = Masks::default();
+    let mut mask_of: HashMap<[u32; 4], u32> = HashMap::new();
+    let mut image_of: HashMap<u32, u32> = HashMap::new();
+    'triangles: for (i, t) in scene.triangles.iter().enumerate() {
         if !baked[i] {
             continue;
         }
-        for k in 0..3 {
+        // Its mask: none (opaque), cut wholly (not drawn), or a texture's alpha.
+        let (mask, tex) = match alpha.and_then(|a| Some((a, a.mask(i as u32)?))) {
+            None => (NO_MASK, [glam::Vec2::ZERO; 3]),
+            Some((a, m)) => 'mask: {
+                let Some(img) = a.images().get(m.texture.image as usize) else {
+                    if m.factor < m.cutoff {
+                        continue 'triangles;
+                    }
+                    break 'mask (NO_MASK, [glam::Vec2::ZERO; 3]);
+                };
+                let image = *image_of.entry(m.texture.image).or_insert_with(|| {
+                    masks
+                        .images
+                        .push([masks.alpha.len() as u32, img.width, img.height, 0]);
+                    masks.alpha.extend(img.pixels.chunks_exact(4).map(|p| p[3]));
+                    (masks.images.len() - 1) as u32
+                });
+                let wrap = |w: Wrap| match w {
+                    Wrap::Repeat => 0,
+                    Wrap::MirroredRepeat => 1,
+                    Wrap::ClampToEdge => 2,
+                };
+                let sm = m.texture.sampler;
+                let sampler =
+                    wrap(sm.wrap_s) | (wrap(sm.wrap_t) << 2) | (u32::from(sm.nearest) << 4);
+                let key = [image, sampler, m.cutoff.to_bits(), m.factor.to_bits()];
+                let mask = *mask_of.entry(key).or_insert_with(|| {
+                    masks.masks.push(GpuMask {
+                        image,
+                        sampler,
+                        cutoff: m.cutoff,
+                        factor: m.factor,
+                    });
+                    (masks.masks.len() - 1) as u32
+                });
+                (mask, m.uv)
+            }
+        };
+        for (k, corner) in tex.iter().enumerate() {
             let p: DVec3 = frame.local(t.vertices[k]);
             let v = GpuVertex {
                 position: [p.x as f32, p.y as f32, p.z as f32],
                 uv: atlas.uv[i][k].to_array(),
                 page: atlas.page[i],
+                tex: corner.to_array(),
+                mask,
             };
             let key = [
                 v.position[0].to_bits(),
@@ -125,6 +201,9 @@ pub(crate) fn vertices(
                 v.uv[0].to_bits(),
                 v.uv[1].to_bits(),
                 v.page,
+                v.tex[0].to_bits(),
+                v.tex[1].to_bits(),
+                v.mask,
             ];
             let index = *seen.entry(key).or_insert_with(|| {
                 out.push(v);
@@ -133,7 +212,7 @@ pub(crate) fn vertices(
             indices.push(index);
         }
     }
-    (out, indices)
+    (out, indices, masks)
 }
 
 struct Batch {
@@ -348,6 +427,22 @@ impl Gpu {
             contents: bytemuck::cast_slice(s.vertices),
             usage: wgpu::BufferUsages::VERTEX,
         });
+        // The masks' tables, never empty (a binding needs bytes).
+        let mask_infos = if s.masks.masks.is_empty() {
+            storage("gather_masks", &[0u8; 16])
+        } else {
+            storage("gather_masks", bytemuck::cast_slice(&s.masks.masks))
+        };
+        let mask_images = if s.masks.images.is_empty() {
+            storage("gather_mask_images", &[0u8; 16])
+        } else {
+            storage("gather_mask_images", bytemuck::cast_slice(&s.masks.images))
+        };
+        let mut alpha_words = vec![0u32; s.masks.alpha.len().div_ceil(4).max(4)];
+        for (k, &a) in s.masks.alpha.iter().enumerate() {
+            alpha_words[k / 4] |= u32::from(a) << (8 * (k % 4));
+        }
+        let mask_alpha = storage("gather_mask_alpha", bytemuck::cast_slice(&alpha_words));
         let indices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("gather_indices"),
             contents: bytemuck::cast_slice(s.indices),
@@ -381,9 +476,16 @@ impl Gpu {
         });
 
         let vs = wgpu::ShaderStages::VERTEX;
+        let fs = wgpu::ShaderStages::FRAGMENT;
         let render_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("gather_render"),
-            entries: &[uniform_entry(0, vs), storage_entry(1, vs)],
+            entries: &[
+                uniform_entry(0, vs),
+                storage_entry(1, vs),
+                storage_entry(11, fs),
+                storage_entry(12, fs),
+                storage_entry(13, fs),
+            ],
         });
         let cs = wgpu::ShaderStages::COMPUTE;
         let reduce_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -445,7 +547,9 @@ impl Gpu {
             bind_group_layouts: &[Some(&render_layout)],
             immediate_size: 0,
         });
-        let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x2, 2 => Uint32];
+        let attributes = wgpu::vertex_attr_array![
+            0 => Float32x3, 1 => Float32x2, 2 => Uint32, 3 => Float32x2, 4 => Uint32
+        ];
         let raster = |label: &str, fs: &str| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some(label),
@@ -553,6 +657,9 @@ impl Gpu {
                 entries: &[
                     entry(0, uniform.as_entire_binding()),
                     entry(1, receivers.as_entire_binding()),
+                    entry(11, mask_infos.as_entire_binding()),
+                    entry(12, mask_images.as_entire_binding()),
+                    entry(13, mask_alpha.as_entire_binding()),
                 ],
             });
             let reduce = |p: usize| {

@@ -37,9 +37,13 @@
 //! of it on its triangle (relative to the image's mean, as the bake's elements), so what it
 //! writes into the radiosity map, and so what every hemicube sees of it, shows the texture.
 //!
-//! Not drawn as the bake has them (documented limits): alpha masks (masked surfaces are
-//! opaque), emissive textures (an emitter shows its mean emission), image skies (refused),
-//! dynamic surfaces (left out, as by the bake).
+//! Alpha masks (`alphaMode` MASK, BLEND as a mask at 0.5) as the bake has them: a masked
+//! triangle's fragments below its cutoff are not drawn (the mask's alpha sampled as its glTF
+//! sampler says), wholly cut triangles are left out, and the shadow rays of the direct light
+//! pass the cut parts.
+//!
+//! Not drawn as the bake has them (documented limits): emissive textures (an emitter shows its
+//! mean emission), image skies (refused), dynamic surfaces (left out, as by the bake).
 
 mod coverage;
 mod gpu;
@@ -344,20 +348,26 @@ impl GpuGather {
         let analytic = params.analytic_emitters && emitters.len() <= ANALYTIC_EMITTERS;
         let emitters = if analytic { &emitters[..] } else { &[] };
         let reflectance = receiver_reflectance(scene, &footprints, &receivers);
+        // Alpha masks: cut fragments are not drawn, and shadow rays pass them.
+        let alpha = radiant_scene::AlphaMasks::new(scene).map(std::sync::Arc::new);
         let gpu_receivers = gpu_receivers(
             scene,
             &frame,
             &receivers,
             &reflectance,
             &baked,
-            emitters,
-            !analytic,
+            &Direct {
+                emitters,
+                draw_emission: !analytic,
+                masks: alpha.as_ref(),
+            },
         );
         let max_reflectance = gpu_receivers
             .iter()
             .flat_map(|r| r.reflectance[..3].iter().map(|&c| f64::from(c)))
             .fold(0.0f64, f64::max);
-        let (vertices, indices) = gpu::vertices(scene, &atlas, &frame, &baked);
+        let (vertices, indices, masks) =
+            gpu::vertices(scene, &atlas, &frame, &baked, alpha.as_deref());
         let sky = match &scene.sky {
             None => gpu::SkyUniform::None,
             Some(Sky::Uniform { radiance }) => gpu::SkyUniform::Uniform(*radiance),
@@ -372,6 +382,7 @@ impl GpuGather {
                 receivers: &gpu_receivers,
                 vertices: &vertices,
                 indices: &indices,
+                masks: &masks,
                 sky,
                 near: NEAR,
                 keep_bytes: params.keep_bytes,
@@ -1014,6 +1025,16 @@ fn emitter_light(vis: &dyn Visibility, x: DVec3, n: DVec3, e: &Emitter, seed: u6
     e.emission.map(|c| c * f)
 }
 
+/// What lights the receivers directly, besides the scene's lights.
+struct Direct<'a> {
+    /// Emissive triangles lit in closed form (none: the emitters are drawn).
+    emitters: &'a [Emitter],
+    /// Whether the emitters show their emission in the hemicubes.
+    draw_emission: bool,
+    /// The alpha masks the shadow rays pass.
+    masks: Option<&'a std::sync::Arc<radiant_scene::AlphaMasks>>,
+}
+
 /// The receivers as the GPU reads them: frame, lifted centre, texel, material and direct
 /// light.
 fn gpu_receivers(
@@ -1022,9 +1043,13 @@ fn gpu_receivers(
     receivers: &[Receiver],
     reflectance: &[Rgb],
     baked: &[bool],
-    emitters: &[Emitter],
-    draw_emission: bool,
+    direct: &Direct,
 ) -> Vec<gpu::GpuReceiver> {
+    let Direct {
+        emitters,
+        draw_emission,
+        masks: alpha,
+    } = *direct;
     use rayon::prelude::*;
     let local_tris: Vec<[Vec3; 3]> = scene
         .triangles
@@ -1033,7 +1058,29 @@ fn gpu_receivers(
         .filter(|(_, b)| **b)
         .map(|(t, _)| t.vertices.map(|v| frame.local(v).as_vec3()))
         .collect();
-    let vis = (!scene.lights.is_empty() || !emitters.is_empty()).then(|| Bvh::new(&local_tris));
+    // The BVH holds the baked triangles only; its ids map back to the scene's for the masks.
+    let scene_index: std::sync::Arc<Vec<u32>> = std::sync::Arc::new(
+        baked
+            .iter()
+            .enumerate()
+            .filter(|(_, b)| **b)
+            .map(|(i, _)| i as u32)
+            .collect(),
+    );
+    let vis = (!scene.lights.is_empty() || !emitters.is_empty()).then(|| match alpha {
+        Some(masks) => {
+            let (marks, masks) = (std::sync::Arc::clone(masks), std::sync::Arc::clone(masks));
+            let (ids, ids2) = (std::sync::Arc::clone(&scene_index), scene_index);
+            Bvh::with_filter(
+                &local_tris,
+                move |t| ids.get(t as usize).is_some_and(|&i| marks.is_masked(i)),
+                std::sync::Arc::new(move |t: u32, u: f32, v: f32| {
+                    ids2.get(t as usize).is_none_or(|&i| masks.blocks(i, u, v))
+                }),
+            )
+        }
+        None => Bvh::new(&local_tris),
+    });
     let lights: Vec<(DVec3, &radiant_scene::Light)> = scene
         .lights
         .iter()

@@ -1,6 +1,7 @@
 //! The GPU hemicube gather on a real adapter (lavapipe in CI): closed forms, the furnace, the
 //! lecture's two-patch table, the CPU hemicube's answer on the Cornell box, hemicubes kept
-//! between sweeps against hemicubes drawn every sweep, and a textured floor against the CPU bake.
+//! between sweeps against hemicubes drawn every sweep, and a textured floor and an alpha-masked
+//! blocker against the CPU bake.
 
 use std::f64::consts::PI;
 
@@ -472,4 +473,86 @@ fn a_furnace_at_reflectance_0_999_converges_with_acceleration() {
     let mean = g.surface_means()[0].mean[0];
     eprintln!("{} sweeps, B = {mean}", last.iterations);
     assert!((mean - 1000.0).abs() < 10.0, "{mean}");
+}
+
+#[test]
+fn an_alpha_masked_blocker_lets_light_through_where_it_is_cut() {
+    // A floor under a light, and between them a blocker whose mask is cut over its right half:
+    // the hemicubes see through the cut part and the shadow rays pass it, as the CPU bake's
+    // rays do; an opaque blocker leaves the floor far darker.
+    use radiant_radiosity::{Bake, BakeParams};
+    let mut triangles = Vec::new();
+    triangles.extend(quad(DVec3::ZERO, DVec3::Z, DVec3::X, 0)); // floor, faces +y
+    let e = DVec3::new(0.35, 0.6, 0.35);
+    triangles.extend(quad(e, DVec3::X * 0.3, DVec3::Z * 0.3, 1)); // light, faces -y
+    triangles.extend(quad(DVec3::Y * 0.3, DVec3::Z, DVec3::X, 2)); // blocker, faces +y
+    for t in &mut triangles {
+        t.uv[0] = t.vertices.map(|v| glam::Vec2::new(v.x as f32, v.z as f32));
+    }
+    let mut blocker = surface("blocker", 0.0, 0.0);
+    blocker.alpha = radiant_scene::AlphaMode::Mask { cutoff: 0.5 };
+    blocker.base_color_texture = Some(radiant_scene::TextureRef {
+        image: 0,
+        sampler: radiant_scene::texture::Sampler {
+            nearest: true,
+            ..Default::default()
+        },
+        tex_coord: 0,
+        transform: Default::default(),
+    });
+    let masked = Scene {
+        surfaces: vec![
+            surface("floor", 0.5, 0.0),
+            surface("light", 0.0, 1.0),
+            blocker,
+        ],
+        images: vec![radiant_scene::Image {
+            name: "half".into(),
+            width: 2,
+            height: 1,
+            pixels: vec![255, 255, 255, 255, 255, 255, 255, 0].into(),
+        }],
+        triangles,
+        ..Scene::default()
+    };
+    let mut params = BakeParams::default();
+    params.mesh.patch_size = 0.08;
+    let cpu = Bake::new(&masked, &params)
+        .expect("cpu bake")
+        .run_to_end(&mut |_| {})
+        .expect("cpu solve");
+    let mean_of = |means: &[radiant_radiosity::metrics::SurfaceMean]| {
+        means
+            .iter()
+            .find(|s| s.name == "floor")
+            .expect("floor")
+            .mean[0]
+    };
+    let want = mean_of(&cpu.surfaces);
+    let gather = |scene: &Scene, analytic_emitters: bool| {
+        let mut g = GpuGather::with_context(
+            gpu(),
+            scene,
+            &GatherParams {
+                texel_density: Some(40.0),
+                analytic_emitters,
+                ..GatherParams::default()
+            },
+        )
+        .expect("gather");
+        g.solve(|_| {}).expect("solve");
+        mean_of(&g.surface_means())
+    };
+    // The emitter in closed form (shadow rays) and drawn (the hemicubes' own view of it).
+    let got = gather(&masked, true);
+    let drawn = gather(&masked, false);
+    let mut opaque = masked.clone();
+    opaque.surfaces[2].alpha = radiant_scene::AlphaMode::Opaque;
+    let blocked = gather(&opaque, true);
+    eprintln!(
+        "floor: CPU {want:.5}, GPU {got:.5}, drawn emitter {drawn:.5}, opaque blocker {blocked:.5}"
+    );
+    assert!((got - want).abs() < 0.03 * want, "{got} against {want}");
+    assert!((drawn - want).abs() < 0.05 * want, "{drawn} against {want}");
+    assert!(blocked < 0.5 * want, "{blocked} against {want}");
 }

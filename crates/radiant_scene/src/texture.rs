@@ -362,11 +362,16 @@ impl Pyramid {
 
 /// One alpha-masked triangle: its mask's texture and UVs, the cutoff and the factor's alpha.
 #[derive(Clone, Copy, Debug)]
-struct MaskedTriangle {
-    texture: TextureRef,
-    uv: [Vec2; 3],
-    cutoff: f32,
-    factor: f32,
+pub struct MaskedTriangle {
+    /// The texture whose alpha masks it; image `u32::MAX` when the triangle is cut wholly
+    /// (its `factor` is then below the cutoff) or needs no lookup.
+    pub texture: TextureRef,
+    /// The texture's (transformed) coordinates at the triangle's corners.
+    pub uv: [Vec2; 3],
+    /// Alpha below this is cut.
+    pub cutoff: f32,
+    /// The base colour factor's alpha, which multiplies the texture's.
+    pub factor: f32,
 }
 
 /// What a masked triangle's texture holds over its UV footprint.
@@ -502,6 +507,17 @@ impl AlphaMasks {
             index,
             masked,
         })
+    }
+
+    /// Scene triangle `triangle`'s mask, `None` when it is opaque.
+    pub fn mask(&self, triangle: u32) -> Option<&MaskedTriangle> {
+        let &i = self.index.get(triangle as usize)?;
+        self.masked.get(i as usize)
+    }
+
+    /// The scene's images, which the masks' textures index.
+    pub fn images(&self) -> &[Image] {
+        &self.images
     }
 
     /// Whether scene triangle `triangle` has a mask.
