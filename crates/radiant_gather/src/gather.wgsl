@@ -215,14 +215,7 @@ struct IdOut {
 // back face sits a little farther than it is (depth is reversed: nearer is greater), so a
 // double-sided surface's twin, at the same depth and facing this way, wins whichever comes
 // first.
-@fragment
-fn id_fs(in: FsIn, @builtin(position) position: vec4<f32>, @builtin(front_facing) front: bool) -> IdOut {
-    if in.mask != NO_MASK {
-        let m = mask_infos[in.mask];
-        if m.factor * mask_alpha_at(m, in.tex) < m.cutoff {
-            discard;
-        }
-    }
+fn id_of(in: FsIn, position: vec4<f32>, front: bool) -> IdOut {
     var out: IdOut;
     if front {
         out.id = vec2<u32>(pack2x16unorm(in.uv), in.page + 1u);
@@ -232,6 +225,25 @@ fn id_fs(in: FsIn, @builtin(position) position: vec4<f32>, @builtin(front_facing
         out.depth = position.z * (1.0 - 1e-5);
     }
     return out;
+}
+
+// A scene without alpha masks: no fragment is discarded (which keeps a CPU rasteriser on its
+// fast path).
+@fragment
+fn id_fs(in: FsIn, @builtin(position) position: vec4<f32>, @builtin(front_facing) front: bool) -> IdOut {
+    return id_of(in, position, front);
+}
+
+// A scene with alpha masks: a masked fragment below its cutoff is not there.
+@fragment
+fn id_masked_fs(in: FsIn, @builtin(position) position: vec4<f32>, @builtin(front_facing) front: bool) -> IdOut {
+    if in.mask != NO_MASK {
+        let m = mask_infos[in.mask];
+        if m.factor * mask_alpha_at(m, in.tex) < m.cutoff {
+            discard;
+        }
+    }
+    return id_of(in, position, front);
 }
 
 @group(0) @binding(3) var light_map: texture_2d_array<f32>;

@@ -593,7 +593,11 @@ impl Gpu {
                 cache: None,
             })
         };
-        let ids = raster("gather_ids", "id_fs");
+        let ids = if s.masks.masks.is_empty() {
+            raster("gather_ids", "id_fs")
+        } else {
+            raster("gather_ids", "id_masked_fs")
+        };
         let reduce_pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("gather_reduce"),
             bind_group_layouts: &[Some(&reduce_layout)],
