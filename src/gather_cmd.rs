@@ -58,11 +58,28 @@ pub fn run_gather(
 ) -> anyhow::Result<(radiant::gather::GpuGather, Vec<Sample>, bool)> {
     let start = Instant::now();
     let mut g = radiant::gather::GpuGather::new(scene, params)?;
+    let line = format!(
+        "{GPU_HEMICUBE}: {} receivers, {} batch(es) of hemicubes ({} kept between sweeps), {} triangles on each of their faces; set up in {:.2} s",
+        g.receivers(),
+        g.batches(),
+        g.kept_batches(),
+        g.drawn_triangles(),
+        start.elapsed().as_secs_f64()
+    );
+    tracing::info!("{line}");
+    eprintln!("{line}");
     let mut overhead = 0.0;
     let mut samples = Vec::new();
     let mut converged = false;
     loop {
-        let s = g.step()?;
+        let s = g.step_with(|k, n| {
+            let line = format!(
+                "{GPU_HEMICUBE}: drew batch {k} of {n} at {:.2} s",
+                start.elapsed().as_secs_f64()
+            );
+            tracing::info!("{line}");
+            eprintln!("{line}");
+        })?;
         let t_s = start.elapsed().as_secs_f64() - overhead;
         let lap = Instant::now();
         let error = reference

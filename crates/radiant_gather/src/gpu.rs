@@ -737,6 +737,11 @@ impl Gpu {
         format!("{} ({:?})", self.ctx.info.name, self.ctx.info.backend)
     }
 
+    /// Triangles drawn on every hemicube face.
+    pub(crate) fn triangles(&self) -> usize {
+        self.index_count as usize / 3
+    }
+
     /// Batches whose hemicube ids are kept between sweeps.
     pub(crate) fn kept_batches(&self) -> usize {
         self.batches.iter().filter(|b| b.kept).count()
@@ -745,10 +750,17 @@ impl Gpu {
     /// One sweep: every batch's hemicubes (drawn now unless kept from an earlier sweep)
     /// reduced with the current radiosity map into the other; returns the new `H` per receiver.
     /// `omega` weighs the step: `H ← ω J(H) + (1 − ω) H_older` (`J` the Jacobi sweep, `H_older`
-    /// the sweep before last); 1 is the plain Jacobi sweep.
-    pub(crate) fn sweep(&mut self, omega: f32) -> Result<Vec<[f32; 3]>, GatherError> {
+    /// the sweep before last); 1 is the plain Jacobi sweep. `on_drawn(k, n)` hears when the
+    /// k-th of the n batches this sweep draws is drawn (each then goes to the GPU on its own).
+    pub(crate) fn sweep(
+        &mut self,
+        omega: f32,
+        on_drawn: &mut dyn FnMut(usize, usize),
+    ) -> Result<Vec<[f32; 3]>, GatherError> {
         let p = self.parity;
         let device = &self.ctx.device;
+        let to_draw = self.batches.iter().filter(|b| !(b.kept && b.drawn)).count();
+        let mut drawn = 0;
         self.ctx.queue.write_buffer(
             &self.sweep_uniform,
             0,
@@ -758,7 +770,8 @@ impl Gpu {
             label: Some("gather_sweep"),
         });
         for batch in &self.batches {
-            if !(batch.kept && batch.drawn) {
+            let draws = !(batch.kept && batch.drawn);
+            if draws {
                 let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                     label: Some("gather_hemicubes"),
                     color_attachments: &[Some(wgpu::RenderPassColorAttachment {
@@ -803,6 +816,20 @@ impl Gpu {
             pass.set_pipeline(&self.reduce);
             pass.set_bind_group(0, &batch.reduce[p], &[]);
             pass.dispatch_workgroups(batch.count, 1, 1);
+            drop(pass);
+            if draws {
+                // A drawing batch is the long part of a sweep: say when each is done.
+                let done = std::mem::replace(
+                    &mut encoder,
+                    device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                        label: Some("gather_sweep"),
+                    }),
+                );
+                self.ctx.queue.submit([done.finish()]);
+                let _ = device.poll(wgpu::PollType::wait_indefinitely());
+                drawn += 1;
+                on_drawn(drawn, to_draw);
+            }
         }
         encoder.copy_buffer_to_buffer(&self.gathered, 0, &self.readback, 0, None);
         self.ctx.queue.submit([encoder.finish()]);

@@ -423,9 +423,19 @@ impl GpuGather {
 
     /// One sweep over every receiver (Jacobi, or its Chebyshev acceleration).
     pub fn step(&mut self) -> Result<Step, GatherError> {
+        self.step_with(|_, _| {})
+    }
+
+    /// [`GpuGather::step`], with `on_drawn(k, n)` called as the k-th of the n batches this
+    /// sweep draws is drawn (all of them in the first sweep, the batches not kept later): the
+    /// long part of a large scene's first sweep.
+    pub fn step_with(
+        &mut self,
+        mut on_drawn: impl FnMut(usize, usize),
+    ) -> Result<Step, GatherError> {
         let start = Instant::now();
         let omega = self.steps.omega(self.iterations);
-        let new = self.gpu.sweep(omega as f32)?;
+        let new = self.gpu.sweep(omega as f32, &mut on_drawn)?;
         self.iterations += 1;
         let (mut diff, mut total) = (0.0f64, 0.0f64);
         for (i, (n, o)) in new.iter().zip(&self.h).enumerate() {
@@ -495,6 +505,11 @@ impl GpuGather {
     /// The adapter's name and backend.
     pub fn adapter(&self) -> String {
         self.gpu.adapter()
+    }
+
+    /// Triangles every hemicube face draws.
+    pub fn drawn_triangles(&self) -> usize {
+        self.gpu.triangles()
     }
 
     /// Batches of hemicubes per sweep.

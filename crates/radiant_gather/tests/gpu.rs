@@ -347,10 +347,18 @@ fn hemicubes_drawn_once_give_the_answer_of_hemicubes_drawn_every_sweep() {
             },
         )
         .expect("gather");
+        // Which batches each sweep draws, as its progress reports them.
+        let mut drawn = Vec::new();
         for _ in 0..3 {
-            g.step().expect("sweep");
+            let mut calls = Vec::new();
+            g.step_with(|k, n| calls.push((k, n))).expect("sweep");
+            let n = calls.last().map_or(0, |c| c.1);
+            assert_eq!(calls, (1..=n).map(|k| (k, n)).collect::<Vec<_>>());
+            drawn.push(n);
         }
-        (g.batches(), g.kept_batches(), g.lightmap().texels)
+        let (batches, kept) = (g.batches(), g.kept_batches());
+        assert_eq!(drawn, [batches, batches - kept, batches - kept]);
+        (batches, kept, g.lightmap().texels)
     };
     let batch_bytes = 3 * 128 * 10 * 128 * 32 * radiant_gather::ID_BYTES;
     let (batches, kept, all) = run(u64::MAX);
