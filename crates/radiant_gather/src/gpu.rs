@@ -20,8 +20,9 @@ use wgpu::util::DeviceExt;
 
 use crate::{Frame, GatherError};
 
-/// The radiosity maps hold f32 where the adapter filters it, else half floats. (With half floats a stiff furnace, ρ = 0.9, stalled 0.8 % short of its fixed point:
-/// once a sweep's increment fell below half a unit in the last place, nothing changed.)
+/// The radiosity maps hold f32 where the adapter filters it, else half floats. (With half
+/// floats a stiff furnace, ρ = 0.9, stalled 0.8 % short of its fixed point: once a sweep's
+/// increment fell below half a unit in the last place, nothing changed.)
 const MAP_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 const MAP_FORMAT_HALF: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 /// What a hemicube pixel sees (`gather.wgsl`): x the light-map coordinates (two unorm16: steps

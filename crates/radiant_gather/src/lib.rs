@@ -26,11 +26,12 @@
 //! ids fit what is left of [`GatherParams::keep_bytes`]; each sweep is then one compute pass
 //! per batch, which samples the current radiosity map `B` at each pixel (bilinearly, as a
 //! fragment would), weights it by the pixel's delta form factor (the multiplier buffer), sums
-//! each cell in one workgroup, and writes the receiver's `H` into a buffer read back for the convergence test
-//! and its `B = E + ρ H` into the next radiosity map (ping-pong, so the sweep is Jacobi). On
-//! the Cornell box on lavapipe at 100 texels per metre, the first sweep (drawing) takes about
-//! 1 s and each later one about 0.14 s, against 1.7 s per sweep when every sweep drew colours.
-//! After [`PLAIN_SWEEPS`] sweeps, Chebyshev acceleration ([`GatherParams::acceleration`]). The
+//! each cell in one workgroup, and writes the receiver's `H` into a buffer read back for the
+//! convergence test and its `B = E + ρ H` into the next radiosity map (ping-pong, so the sweep
+//! is Jacobi). On the Cornell box on lavapipe at 100 texels per metre, the first sweep
+//! (drawing) takes about 1 s and each later one about 0.14 s, against 1.7 s per sweep when
+//! every sweep drew colours. After [`PLAIN_SWEEPS`] sweeps, Chebyshev acceleration
+//! ([`GatherParams::acceleration`]). The
 //! gather is a form-factor-free mode: no links, nothing stored per pair.
 //!
 //! A texel of a surface with a base-colour texture reflects the texture's mean over the part
