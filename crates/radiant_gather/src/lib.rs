@@ -31,8 +31,8 @@
 //! is Jacobi). On the Cornell box on lavapipe at 100 texels per metre, the first sweep
 //! (drawing) takes about 1 s and each later one about 0.14 s, against 1.7 s per sweep when
 //! every sweep drew colours. After [`PLAIN_SWEEPS`] sweeps, Chebyshev acceleration
-//! ([`GatherParams::acceleration`]). The
-//! gather is a form-factor-free mode: no links, nothing stored per pair.
+//! ([`GatherParams::acceleration`]). The gather is a form-factor-free mode: no links, nothing
+//! stored per pair.
 //!
 //! A texel of a surface with a base-colour texture reflects the texture's mean over the part
 //! of it on its triangle (relative to the image's mean, as the bake's elements), so what it
