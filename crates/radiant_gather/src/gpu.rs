@@ -415,10 +415,11 @@ impl Gpu {
             ..Default::default()
         });
 
+        // A storage buffer, never empty (a binding needs bytes).
         let storage = |label: &str, bytes: &[u8]| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
-                contents: bytes,
+                contents: if bytes.is_empty() { &[0u8; 16] } else { bytes },
                 usage: wgpu::BufferUsages::STORAGE,
             })
         };
@@ -428,18 +429,9 @@ impl Gpu {
             contents: bytemuck::cast_slice(s.vertices),
             usage: wgpu::BufferUsages::VERTEX,
         });
-        // The masks' tables, never empty (a binding needs bytes).
-        let mask_infos = if s.masks.masks.is_empty() {
-            storage("gather_masks", &[0u8; 16])
-        } else {
-            storage("gather_masks", bytemuck::cast_slice(&s.masks.masks))
-        };
-        let mask_images = if s.masks.images.is_empty() {
-            storage("gather_mask_images", &[0u8; 16])
-        } else {
-            storage("gather_mask_images", bytemuck::cast_slice(&s.masks.images))
-        };
-        let mut alpha_words = vec![0u32; s.masks.alpha.len().div_ceil(4).max(4)];
+        let mask_infos = storage("gather_masks", bytemuck::cast_slice(&s.masks.masks));
+        let mask_images = storage("gather_mask_images", bytemuck::cast_slice(&s.masks.images));
+        let mut alpha_words = vec![0u32; s.masks.alpha.len().div_ceil(4)];
         for (k, &a) in s.masks.alpha.iter().enumerate() {
             alpha_words[k / 4] |= u32::from(a) << (8 * (k % 4));
         }

@@ -51,7 +51,7 @@ mod gpu;
 
 use std::time::Instant;
 
-use glam::{DVec3, Vec2, Vec3};
+use glam::{DVec3, Vec3};
 use radiant_radiosity::Rgb;
 use radiant_radiosity::lightmap::LightMap;
 use radiant_radiosity::metrics::SurfaceMean;
@@ -909,7 +909,7 @@ fn receiver_reflectance(
     footprints: &[[glam::DVec2; 3]],
     receivers: &[Receiver],
 ) -> Vec<Rgb> {
-    use radiant_scene::texture::Pyramid;
+    use radiant_radiosity::input::{footprint_ratio, texture_pyramids};
     use rayon::prelude::*;
     let surface = |r: &Receiver| {
         let t = scene.triangles.get(r.texel.triangle as usize)?;
@@ -924,12 +924,7 @@ fn receiver_reflectance(
             *u = true;
         }
     }
-    let pyramids: Vec<Option<(Pyramid, [f64; 4])>> = scene
-        .images
-        .par_iter()
-        .zip(used)
-        .map(|(img, u)| u.then(|| (Pyramid::new(img), img.mean_linear())))
-        .collect();
+    let pyramids = texture_pyramids(&scene.images, used);
     receivers
         .par_iter()
         .with_min_len(256)
@@ -940,15 +935,12 @@ fn receiver_reflectance(
             let Some(t) = &s.base_color_texture else {
                 return s.reflectance;
             };
-            let Some(Some((pyramid, mean))) = pyramids.get(t.image as usize) else {
-                return s.reflectance;
-            };
             let fp = footprints[r.texel.triangle as usize];
             let Some(poly) = coverage::clip_polygon(f64::from(r.texel.x), f64::from(r.texel.y), fp)
             else {
                 return s.reflectance;
             };
-            // The covered part as a fan of triangles, each's footprint mean weighed by its area.
+            // The covered part as a fan of triangles, each's footprint ratio weighed by its area.
             let (mut sum, mut weight) = ([0.0f64; 3], 0.0f64);
             for k in 1..poly.len() - 1 {
                 let corners = [poly[0], poly[k], poly[k + 1]];
@@ -956,31 +948,20 @@ fn receiver_reflectance(
                 if area.is_nan() || area <= 0.0 {
                     continue;
                 }
-                let uv = corners.map(|c| {
+                let bary = corners.map(|c| {
                     let (u, v) = coverage::barycentric(fp, c);
-                    let raw: [Vec2; 2] = std::array::from_fn(|set| {
-                        let q = tri.uv[set].map(|p| p.as_dvec2());
-                        (q[0] * (1.0 - u - v) + q[1] * u + q[2] * v).as_vec2()
-                    });
-                    t.uv(raw)
+                    [1.0 - u - v, u, v]
                 });
-                let m = pyramid.footprint_mean(t.sampler, uv);
+                let ratio = footprint_ratio(&pyramids, t, tri, bary);
                 for c in 0..3 {
-                    sum[c] += area * m[c];
+                    sum[c] += area * ratio[c];
                 }
                 weight += area;
             }
             if weight.is_nan() || weight <= 0.0 {
                 return s.reflectance;
             }
-            std::array::from_fn(|c| {
-                let ratio = if mean[c] > 0.0 {
-                    sum[c] / weight / mean[c]
-                } else {
-                    1.0
-                };
-                (s.reflectance[c] * ratio).clamp(0.0, 1.0)
-            })
+            std::array::from_fn(|c| (s.reflectance[c] * sum[c] / weight).clamp(0.0, 1.0))
         })
         .collect()
 }

@@ -109,10 +109,8 @@ fn a_floor_under_a_square_emitter_gets_howells_form_factors() {
     );
 }
 
-#[test]
-fn the_furnace_holds_at_reflectance_0_9() {
-    // A closed cube, inside faces emitting 1 with reflectance 0.9: B = E / (1 − ρ) = 10 and
-    // every texel's incident H = B, with no leak at the edges.
+/// A closed unit cube whose inside faces emit 1 with reflectance `rho`.
+fn furnace(rho: f64) -> Scene {
     let mut triangles = Vec::new();
     let (o, x, y, z) = (DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z);
     triangles.extend(quad(o, z, x, 0)); // floor, faces +y
@@ -121,11 +119,18 @@ fn the_furnace_holds_at_reflectance_0_9() {
     triangles.extend(quad(o + z, y, x, 0)); // z = 1, faces -z
     triangles.extend(quad(o, y, z, 0)); // x = 0, faces +x
     triangles.extend(quad(o + x, z, y, 0)); // x = 1, faces -x
-    let scene = Scene {
-        surfaces: vec![surface("walls", 0.9, 1.0)],
+    Scene {
+        surfaces: vec![surface("walls", rho, 1.0)],
         triangles,
         ..Scene::default()
-    };
+    }
+}
+
+#[test]
+fn the_furnace_holds_at_reflectance_0_9() {
+    // A closed cube, inside faces emitting 1 with reflectance 0.9: B = E / (1 − ρ) = 10 and
+    // every texel's incident H = B, with no leak at the edges.
+    let scene = furnace(0.9);
     // Plain Jacobi sweeps and their Chebyshev acceleration reach the same fixed point; the
     // acceleration in far fewer sweeps on this stiff case.
     let mut sweeps = Vec::new();
@@ -374,13 +379,47 @@ fn hemicubes_drawn_once_give_the_answer_of_hemicubes_drawn_every_sweep() {
     assert!(all == first && all == none, "the light maps differ");
 }
 
+/// The red mean radiosity of the surface "floor": of `scene`'s CPU bake with elements of
+/// `patch_size`, and of its gather at 40 texels per unit (the emitter in closed form or drawn).
+fn cpu_floor(scene: &Scene, patch_size: f64) -> f64 {
+    let mut params = radiant_radiosity::BakeParams::default();
+    params.mesh.patch_size = patch_size;
+    let cpu = radiant_radiosity::Bake::new(scene, &params)
+        .expect("cpu bake")
+        .run_to_end(&mut |_| {})
+        .expect("cpu solve");
+    floor_mean(&cpu.surfaces)
+}
+
+fn gpu_floor(scene: &Scene, analytic_emitters: bool) -> f64 {
+    let mut g = GpuGather::with_context(
+        gpu(),
+        scene,
+        &GatherParams {
+            texel_density: Some(40.0),
+            analytic_emitters,
+            ..GatherParams::default()
+        },
+    )
+    .expect("gather");
+    g.solve(|_| {}).expect("solve");
+    floor_mean(&g.surface_means())
+}
+
+fn floor_mean(means: &[radiant_radiosity::metrics::SurfaceMean]) -> f64 {
+    means
+        .iter()
+        .find(|s| s.name == "floor")
+        .expect("floor")
+        .mean[0]
+}
+
 #[test]
 fn a_textured_floor_reflects_its_texture_as_the_bake_does() {
     // A floor whose base colour is white on its left half and black on its right, under a
     // light over the left half: each texel reflects its texture's footprint, so the floor's
     // mean radiosity is the CPU bake's (which reads the same footprints per element), far
     // from what its mean reflectance alone would give.
-    use radiant_radiosity::{Bake, BakeParams};
     let mut triangles = Vec::new();
     triangles.extend(quad(DVec3::ZERO, DVec3::Z, DVec3::X, 0)); // faces +y
     let e = DVec3::new(0.15, 0.3, 0.4);
@@ -411,33 +450,8 @@ fn a_textured_floor_reflects_its_texture_as_the_bake_does() {
         triangles,
         ..Scene::default()
     };
-    let mut params = BakeParams::default();
-    params.mesh.patch_size = 0.04;
-    let cpu = Bake::new(&textured, &params)
-        .expect("cpu bake")
-        .run_to_end(&mut |_| {})
-        .expect("cpu solve");
-    let mean_of = |means: &[radiant_radiosity::metrics::SurfaceMean]| {
-        means
-            .iter()
-            .find(|s| s.name == "floor")
-            .expect("floor")
-            .mean[0]
-    };
-    let want = mean_of(&cpu.surfaces);
-    let gather = |scene: &Scene| {
-        let mut g = GpuGather::with_context(
-            gpu(),
-            scene,
-            &GatherParams {
-                texel_density: Some(40.0),
-                ..GatherParams::default()
-            },
-        )
-        .expect("gather");
-        g.solve(|_| {}).expect("solve");
-        mean_of(&g.surface_means())
-    };
+    let want = cpu_floor(&textured, 0.04);
+    let gather = |scene: &Scene| gpu_floor(scene, true);
     let got = gather(&textured);
     let mut plain = textured.clone();
     plain.surfaces[0].base_color_texture = None;
@@ -455,19 +469,7 @@ fn a_furnace_at_reflectance_0_999_converges_with_acceleration() {
     // The stiff case: a closed cube of reflectance 0.999 emitting 1, B = E / (1 − ρ) = 1000.
     // Plain Jacobi sweeps would need thousands; the accelerated ones settle within the sweep
     // limit, without a non-finite value, to within 1 %.
-    let mut triangles = Vec::new();
-    let (o, x, y, z) = (DVec3::ZERO, DVec3::X, DVec3::Y, DVec3::Z);
-    triangles.extend(quad(o, z, x, 0));
-    triangles.extend(quad(o + y, x, z, 0));
-    triangles.extend(quad(o, x, y, 0));
-    triangles.extend(quad(o + z, y, x, 0));
-    triangles.extend(quad(o, y, z, 0));
-    triangles.extend(quad(o + x, z, y, 0));
-    let scene = Scene {
-        surfaces: vec![surface("walls", 0.999, 1.0)],
-        triangles,
-        ..Scene::default()
-    };
+    let scene = furnace(0.999);
     let params = GatherParams {
         resolution: 16,
         texel_density: Some(8.0),
@@ -488,7 +490,6 @@ fn an_alpha_masked_blocker_lets_light_through_where_it_is_cut() {
     // A floor under a light, and between them a blocker whose mask is cut over its right half:
     // the hemicubes see through the cut part and the shadow rays pass it, as the CPU bake's
     // rays do; an opaque blocker leaves the floor far darker.
-    use radiant_radiosity::{Bake, BakeParams};
     let mut triangles = Vec::new();
     triangles.extend(quad(DVec3::ZERO, DVec3::Z, DVec3::X, 0)); // floor, faces +y
     let e = DVec3::new(0.35, 0.6, 0.35);
@@ -523,34 +524,8 @@ fn an_alpha_masked_blocker_lets_light_through_where_it_is_cut() {
         triangles,
         ..Scene::default()
     };
-    let mut params = BakeParams::default();
-    params.mesh.patch_size = 0.08;
-    let cpu = Bake::new(&masked, &params)
-        .expect("cpu bake")
-        .run_to_end(&mut |_| {})
-        .expect("cpu solve");
-    let mean_of = |means: &[radiant_radiosity::metrics::SurfaceMean]| {
-        means
-            .iter()
-            .find(|s| s.name == "floor")
-            .expect("floor")
-            .mean[0]
-    };
-    let want = mean_of(&cpu.surfaces);
-    let gather = |scene: &Scene, analytic_emitters: bool| {
-        let mut g = GpuGather::with_context(
-            gpu(),
-            scene,
-            &GatherParams {
-                texel_density: Some(40.0),
-                analytic_emitters,
-                ..GatherParams::default()
-            },
-        )
-        .expect("gather");
-        g.solve(|_| {}).expect("solve");
-        mean_of(&g.surface_means())
-    };
+    let want = cpu_floor(&masked, 0.08);
+    let gather = gpu_floor;
     // The emitter in closed form (shadow rays) and drawn (the hemicubes' own view of it).
     let got = gather(&masked, true);
     let drawn = gather(&masked, false);

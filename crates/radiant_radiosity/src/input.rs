@@ -330,30 +330,14 @@ fn element_textures_keeping(
             }
         }
     }
-    let pyramids: Vec<Option<(Pyramid, [f64; 4])>> = scene
-        .images
-        .par_iter()
-        .zip(used)
-        .map(|(img, u)| u.then(|| (Pyramid::new(img), img.mean_linear())))
-        .collect();
+    let pyramids = texture_pyramids(&scene.images, used);
     let n = mesh.element_count();
     let mut out = ElementTextures {
         reflectance: vec![[1.0; 3]; n],
         emission: vec![[1.0; 3]; n],
     };
     let ratio = |t: &TextureRef, tri: &radiant_scene::Triangle, corners: [[f64; 3]; 3]| {
-        let Some(Some((pyramid, mean))) = pyramids.get(t.image as usize) else {
-            return [1.0; 3];
-        };
-        let uv = corners.map(|b| {
-            let raw: [Vec2; 2] = std::array::from_fn(|set| {
-                let u = tri.uv[set];
-                (u[0].as_dvec2() * b[0] + u[1].as_dvec2() * b[1] + u[2].as_dvec2() * b[2]).as_vec2()
-            });
-            t.uv(raw)
-        });
-        let m = pyramid.footprint_mean(t.sampler, uv);
-        std::array::from_fn(|c| if mean[c] > 0.0 { m[c] / mean[c] } else { 1.0 })
+        footprint_ratio(&pyramids, t, tri, corners)
     };
     out.reflectance
         .par_iter_mut()
@@ -389,6 +373,42 @@ fn element_textures_keeping(
             }
         });
     Some(out)
+}
+
+/// One linear-light mip chain, and the image's mean, per image `used` marks (built in
+/// parallel), for [`footprint_ratio`].
+pub fn texture_pyramids(
+    images: &[radiant_scene::Image],
+    used: Vec<bool>,
+) -> Vec<Option<(Pyramid, [f64; 4])>> {
+    images
+        .par_iter()
+        .zip(used)
+        .map(|(img, u)| u.then(|| (Pyramid::new(img), img.mean_linear())))
+        .collect()
+}
+
+/// The mean of texture `t` over the part of `tri` with barycentric corners `corners`, over the
+/// whole image's mean, per channel: what multiplies the surface's reflectance (or emission)
+/// there. 1 where the image has no pyramid or a channel's mean is 0.
+pub fn footprint_ratio(
+    pyramids: &[Option<(Pyramid, [f64; 4])>],
+    t: &TextureRef,
+    tri: &radiant_scene::Triangle,
+    corners: [[f64; 3]; 3],
+) -> Rgb {
+    let Some(Some((pyramid, mean))) = pyramids.get(t.image as usize) else {
+        return [1.0; 3];
+    };
+    let uv = corners.map(|b| {
+        let raw: [Vec2; 2] = std::array::from_fn(|set| {
+            let u = tri.uv[set];
+            (u[0].as_dvec2() * b[0] + u[1].as_dvec2() * b[1] + u[2].as_dvec2() * b[2]).as_vec2()
+        });
+        t.uv(raw)
+    });
+    let m = pyramid.footprint_mean(t.sampler, uv);
+    std::array::from_fn(|c| if mean[c] > 0.0 { m[c] / mean[c] } else { 1.0 })
 }
 
 /// Per element: reflectance (clamped to [0, 1]) and emission, from the surfaces and, where
