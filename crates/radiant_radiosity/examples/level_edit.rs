@@ -73,8 +73,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     let p = e.phases;
     println!(
-        "  replay {:.3} s, meshing {:.3} s, BVH and tree {:.3} s, direct light {:.3} s, matching {:.3} s, refinement {:.3} s, rows {:.3} s",
-        p.replay, p.meshing, p.visibility, p.direct_light, p.matching, p.refinement, p.rows
+        "  replay {:.3} s, meshing {:.3} s, BVH and tree {:.3} s, direct light {:.3} s, matching {:.3} s, refinement {:.3} s, assembly {:.3} s ({}), rows {:.3} s",
+        p.replay,
+        p.meshing,
+        p.visibility,
+        p.direct_light,
+        p.matching,
+        p.refinement,
+        p.assembly,
+        if e.in_place {
+            "in place"
+        } else {
+            "beside the old record"
+        },
+        p.rows
     );
     println!("the edit returned after {edited:.3} s");
     if std::env::var_os("LEVEL_EDIT_QUIT").is_some() {

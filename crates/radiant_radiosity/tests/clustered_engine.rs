@@ -259,6 +259,11 @@ fn a_geometry_edit_refines_only_what_it_touches_and_equals_a_fresh_bake() {
             same_links(&b, &f),
             "{name} moved: links differ from a fresh bake's"
         );
+        // Put together over the old record, which the next edit reads as its own.
+        assert!(
+            e.in_place,
+            "{name} moved: the record was assembled beside the old one"
+        );
         // Against the form factors a fresh bake computes (hidden links included): measured
         // 46 % for the short block, 53 % for the tall one, most of them the links of the moved
         // block's own triangles (a third of this small level's links) and of the clusters that

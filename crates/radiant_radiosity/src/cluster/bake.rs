@@ -8,9 +8,9 @@ use std::time::{Duration, Instant};
 use radiant_scene::{Light, Scene, Sky, Surface};
 use radiant_visibility::Visibility;
 
-use super::edit::{Before, Moved, New, Old};
+use super::edit::{self, Before, Moved, New, Old};
 use super::record::Record;
-use super::refine::RefineStats;
+use super::refine::{Link, RefineStats, Walk};
 use super::solve::{HierSystem, LINK_BYTES, Sweeping};
 use super::tree::Tree;
 use super::{
@@ -104,6 +104,9 @@ pub struct GeometryEdit {
     pub seconds: f64,
     /// Where they went.
     pub phases: EditPhases,
+    /// The new refinement's record was put together in the old record's memory, not in fresh
+    /// memory beside it (see [`ClusterBake::edit_geometry`]).
+    pub in_place: bool,
 }
 
 /// Seconds of a geometry edit's phases.
@@ -121,6 +124,8 @@ pub struct EditPhases {
     pub replay: f64,
     /// The refinement, copied where nothing changed.
     pub refinement: f64,
+    /// Its record put together.
+    pub assembly: f64,
     /// The solver's rows.
     pub rows: f64,
 }
@@ -319,7 +324,7 @@ impl ClusterBake {
             None if has_emitters => {
                 let dead = crate::hierarchy::enclosed_elements(&mesh, &bvh, params.ff.seed);
                 let inputs = (&mesh, &tree, &bvh as &dyn Visibility, &oracle);
-                let (record, eps, stats) = refine_within_budget(
+                let (walk, eps, stats) = refine_within_budget(
                     inputs,
                     params,
                     cp,
@@ -329,6 +334,12 @@ impl ClusterBake {
                     stop,
                     None,
                 )?;
+                let record = walk.assemble(None).ok_or(BakeError::OutOfMemory {
+                    what: "the refinement's record",
+                    needed: Record::bytes_of(walk.extent()),
+                    limit: budget.limit,
+                })?;
+                drop(walk);
                 let sys = HierSystem::new(&mesh, &tree, &record.links, rho, source, dead)?;
                 refined = stats;
                 (sys, eps, None, cp.edits.then_some(record))
@@ -586,7 +597,10 @@ impl ClusterBake {
     /// sample count are the old ones and its shaft is clear. Visibility rays are seeded by the
     /// nodes' own triangles, so the links equal a fresh bake's bit for bit. Direct light and
     /// enclosed elements are computed again; the sweeps warm-start from the current light,
-    /// carried to the triangles that stayed.
+    /// carried to the triangles that stayed. The new record is put together in the old one's
+    /// memory, what it keeps moved into place ([`GeometryEdit::in_place`]); only where that
+    /// cannot be done is it written beside it, the old record then counted in the memory
+    /// budget too.
     ///
     /// [`BakeError::NeedsRebuild`] when the scene's bounding box changed (every local
     /// coordinate would), when nothing emits before or after, or when the surfaces were
@@ -696,7 +710,7 @@ impl ClusterBake {
         phases.matching = lap();
         let mut warnings = scene.warnings();
         let inputs = (&mesh, &tree, &bvh as &dyn Visibility, &oracle);
-        let (record, eps, stats) = refine_within_budget(
+        let (walk, eps, stats) = refine_within_budget(
             inputs,
             &self.params,
             &self.cp,
@@ -706,8 +720,37 @@ impl ClusterBake {
             stop,
             before.as_ref(),
         )?;
-        drop(before);
         phases.refinement = lap();
+        // Put together in the old record's memory (the edit's record is mostly the old one),
+        // or, when that cannot be done, into fresh memory beside it.
+        let new_of_old = before.map(Before::into_new_of_old);
+        let remap = |l: Link| match &new_of_old {
+            Some(map) => edit::remap(map, l),
+            None => l,
+        };
+        let over = match self.record.as_mut() {
+            Some(old) => walk.assemble_over(old, &remap),
+            None => false,
+        };
+        let record = if over {
+            // Spent: an edit that fails from here on leaves the bake without a record, and the
+            // next edit makes the refinement again first.
+            self.record.take()
+        } else {
+            let old = self.record.as_ref();
+            budget.reserve(
+                "the refinement's record before the edit",
+                old.map_or(0, Record::bytes),
+            )?;
+            walk.assemble(old.map(|r| (r, &remap as &(dyn Fn(Link) -> Link + Sync))))
+        };
+        let record = record.ok_or(BakeError::OutOfMemory {
+            what: "the refinement's record",
+            needed: Record::bytes_of(walk.extent()),
+            limit: budget.limit,
+        })?;
+        drop(walk);
+        phases.assembly = lap();
         let terms = (rho, source, dead);
         let sys = HierSystem::new_in(&mesh, &tree, &record.links, terms, Some(&mut self.sys))?;
         phases.rows = lap();
@@ -748,7 +791,9 @@ impl ClusterBake {
             matching = phases.matching,
             replay = phases.replay,
             refinement = phases.refinement,
+            assembly = phases.assembly,
             rows = phases.rows,
+            in_place = over,
             "clustered bake: geometry edit"
         );
         Ok(GeometryEdit {
@@ -759,6 +804,7 @@ impl ClusterBake {
             nodes,
             seconds: started.elapsed().as_secs_f64(),
             phases,
+            in_place: over,
         })
     }
 
@@ -963,7 +1009,7 @@ fn refine_within_budget(
     progress: &(dyn Fn(Phase, usize, usize) + Sync),
     stop: Option<&AtomicBool>,
     before: Option<&Before<'_>>,
-) -> Result<(Record, f64, RefineStats), BakeError> {
+) -> Result<(Walk, f64, RefineStats), BakeError> {
     let asked = params.links.refinement;
     let mut eps = asked;
     for attempt in 0..=COARSEN_STEPS {
@@ -986,11 +1032,12 @@ fn refine_within_budget(
             replay: None,
         };
         let t = Instant::now();
-        if let Some((record, stats)) = r.build(&|d, n| progress(Phase::Links, d, n)) {
-            budget.reserve("the links", record.links.len() as u64 * LINK_BYTES)?;
+        if let Some((walk, stats)) = r.walk(&|d, n| progress(Phase::Links, d, n)) {
+            let e = walk.extent();
+            budget.reserve("the links", e.links * LINK_BYTES)?;
             budget.reserve(
                 "the refinement's record",
-                record.bytes() - record.links.len() as u64 * 12,
+                Record::bytes_of(e) - e.links * std::mem::size_of::<Link>() as u64,
             )?;
             if attempt > 0 {
                 warnings.push(format!(
@@ -998,7 +1045,7 @@ fn refine_within_budget(
                     budget.limit >> 20
                 ));
             }
-            return Ok((record, eps, stats));
+            return Ok((walk, eps, stats));
         }
         if stop.is_some_and(|f| f.load(Ordering::Relaxed)) {
             return Err(BakeError::Stopped);

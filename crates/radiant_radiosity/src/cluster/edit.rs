@@ -58,6 +58,15 @@ pub(crate) struct Before<'a> {
     moved: &'a Moved,
 }
 
+/// An old link in new node numbers, by `new_of_old` (per old node, the new node).
+pub(crate) fn remap(new_of_old: &[u32], l: Link) -> Link {
+    Link {
+        recv: new_of_old[l.recv as usize],
+        src: new_of_old[l.src as usize],
+        ff: l.ff,
+    }
+}
+
 /// Where the triangles that came and went in an edit lie (local frame): at most [`SPHERES`]
 /// bounding spheres, and one around them all. What no segment or ray can reach through them is
 /// what the edit left as it was.
@@ -244,11 +253,13 @@ impl<'a> Before<'a> {
     /// An old link in the new numbering (both its nodes are old ones).
     #[inline]
     pub fn remap(&self, l: Link) -> Link {
-        Link {
-            recv: self.new_of_old[l.recv as usize],
-            src: self.new_of_old[l.src as usize],
-            ff: l.ff,
-        }
+        remap(&self.new_of_old, l)
+    }
+
+    /// Per old node, the new node it is (or [`NONE`]): what [`Before::remap`] reads, kept when
+    /// the rest goes.
+    pub fn into_new_of_old(self) -> Vec<u32> {
+        self.new_of_old
     }
 
     /// The old children of old node `id` (none for an element).

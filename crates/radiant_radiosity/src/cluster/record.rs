@@ -32,6 +32,63 @@ const FOUR: u8 = 8;
 /// The subtree's size is in [`Record::sized`].
 const SIZED: u8 = 16;
 
+/// [`Record::assemble_over`] sets aside at most this share of the old record (stretches out of
+/// its order); with more, a record in fresh memory is no dearer.
+pub const ASIDE_AT_MOST: f64 = 0.5;
+
+/// Which of the stretches `[from, to)` of one record that `olds` yields (`n` of them, in the
+/// order they are written) stay in place in [`Record::assemble_over`]: a heaviest run of them
+/// (by bytes) that is in the record's own order, its stretches apart, found as a weighted
+/// longest increasing subsequence over a Fenwick tree of prefix maxima, `O(n log n)` time and
+/// about 30 bytes a stretch; `None` when that memory cannot be had.
+fn in_order<I: Iterator<Item = (Pos, Pos)>>(olds: impl Fn() -> I, n: usize) -> Option<Vec<bool>> {
+    // A stretch may follow one that ends at or before its start (the three counts of a place
+    // in one record rise together, so its pairs' count orders it).
+    let mut ends: Vec<u64> = Vec::new();
+    ends.try_reserve_exact(n).ok()?;
+    ends.extend(olds().map(|(_, b)| b.ops));
+    ends.sort_unstable();
+    ends.dedup();
+    let weight = |a: Pos, b: Pos| Record::bytes_of(a.to(b)) + 1;
+    // Per end rank: the heaviest run ending at or before it, and its last stretch.
+    let mut tree: Vec<(u64, u32)> = Vec::new();
+    tree.try_reserve_exact(ends.len() + 1).ok()?;
+    tree.resize(ends.len() + 1, (0, u32::MAX));
+    let mut prev: Vec<u32> = Vec::new();
+    prev.try_reserve_exact(n).ok()?;
+    let mut best = (0u64, u32::MAX);
+    for (i, (a, b)) in olds().enumerate() {
+        let mut r = ends.partition_point(|&e| e <= a.ops);
+        let mut found = (0u64, u32::MAX);
+        while r > 0 {
+            if tree[r].0 > found.0 {
+                found = tree[r];
+            }
+            r &= r - 1;
+        }
+        prev.push(found.1);
+        let run = (found.0 + weight(a, b), i as u32);
+        if run.0 > best.0 {
+            best = run;
+        }
+        let mut r = ends.partition_point(|&e| e < b.ops) + 1;
+        while r < tree.len() {
+            if run.0 > tree[r].0 {
+                tree[r] = run;
+            }
+            r += r & r.wrapping_neg();
+        }
+    }
+    drop((ends, tree));
+    let mut keep = vec![false; n];
+    let mut at = best.1;
+    while at != u32::MAX {
+        keep[at as usize] = true;
+        at = prev[at as usize];
+    }
+    Some(keep)
+}
+
 /// Subtrees of at least this many pairs carry their size.
 pub const SIZED_AT: u64 = 256;
 
@@ -152,9 +209,7 @@ impl Record {
 
     /// Bytes held.
     pub fn bytes(&self) -> u64 {
-        (self.ops.len()
-            + self.links.len() * std::mem::size_of::<Link>()
-            + self.sized.len() * std::mem::size_of::<Extent>()) as u64
+        Record::bytes_of(Pos::default().to(self.end()))
     }
 
     /// The end of the record.
@@ -280,69 +335,8 @@ impl Record {
         old: Option<(&Record, &(dyn Fn(Link) -> Link + Sync))>,
     ) -> Option<Record> {
         use rayon::prelude::*;
-        let kept = |e: Extent| {
-            if links_only {
-                Extent {
-                    links: e.links,
-                    ..Extent::default()
-                }
-            } else {
-                e
-            }
-        };
-        // The extents of the top's splits, and whether each is sized.
-        let mut split_extent = vec![(Extent::default(), false); top.len()];
-        let mut open: Vec<(usize, Extent)> = Vec::new();
-        let mut sum = Extent::default();
-        for (i, t) in top.iter().enumerate() {
-            match *t {
-                Top::Open(..) => {
-                    open.push((i, sum));
-                    sum = Extent::default();
-                }
-                Top::Piece(p) => sum = sum + kept(pieces[p].extent()),
-                Top::Close => {
-                    let (at, outer) = open.pop()?;
-                    let mut e = sum
-                        + kept(Extent {
-                            ops: 1,
-                            links: 0,
-                            sized: 1,
-                        });
-                    let sized = e.ops >= SIZED_AT && !links_only;
-                    if !sized {
-                        e.sized -= u64::from(!links_only);
-                    }
-                    split_extent[at] = (e, sized);
-                    sum = outer + e;
-                }
-            }
-        }
-        // Each part's place, in order: a split's own entry, or a piece with its stretches.
-        enum Job<'p> {
-            Split(u8, Option<Extent>),
-            Piece(&'p Piece),
-        }
-        let mut jobs: Vec<(Job<'_>, Extent)> = Vec::with_capacity(top.len());
-        for (i, t) in top.iter().enumerate() {
-            match *t {
-                Top::Open(op, n) => {
-                    let (e, sized) = split_extent[i];
-                    let code =
-                        op.code() | if n == 4 { FOUR } else { 0 } | if sized { SIZED } else { 0 };
-                    let size = Extent {
-                        ops: 1,
-                        links: 0,
-                        sized: u64::from(sized),
-                    };
-                    if !links_only {
-                        jobs.push((Job::Split(code, sized.then_some(e)), size));
-                    }
-                }
-                Top::Piece(p) => jobs.push((Job::Piece(&pieces[p]), kept(pieces[p].extent()))),
-                Top::Close => {}
-            }
-        }
+        let kept = |e: Extent| kept(e, links_only);
+        let jobs = layout(top, pieces, links_only)?;
         let total = jobs.iter().fold(Extent::default(), |a, j| a + j.1);
         let mut out = Record {
             ops: bytemuck::allocation::try_zeroed_vec(total.ops as usize).ok()?,
@@ -407,6 +401,330 @@ impl Record {
             });
         (!missing.into_inner()).then_some(out)
     }
+
+    /// The size of the record [`Record::assemble`] makes of these parts; `None` when the top
+    /// does not close every split it opens.
+    pub fn extent_of(top: &[Top], pieces: &[Piece], links_only: bool) -> Option<Extent> {
+        let jobs = layout(top, pieces, links_only)?;
+        Some(jobs.iter().fold(Extent::default(), |a, j| a + j.1))
+    }
+
+    /// Bytes a record of this size holds (as [`Record::bytes`]).
+    pub fn bytes_of(e: Extent) -> u64 {
+        e.ops
+            + e.links * std::mem::size_of::<Link>() as u64
+            + e.sized * std::mem::size_of::<Extent>() as u64
+    }
+
+    /// [`Record::assemble`] into the memory of `old`, the record the pieces hold stretches of,
+    /// which becomes the assembled record: those stretches move to their new places (their
+    /// links mapped by `remap`) and what the pieces made themselves is written around them.
+    /// An edit's record is mostly the one before it, so this takes little memory beyond what
+    /// the record grows by: on this virtual machine fresh pages cost about a second per
+    /// gigabyte to touch (nine the first time), and a level edit's new record was half a
+    /// gigabyte held beside the old one. Stretches out of `old`'s order (an edit that
+    /// reordered the tree around what moved) are copied aside first; the others move in
+    /// place. `false`, with `old` as it was, when it should not be done: the pieces or `old`
+    /// hold links alone, a stretch is not inside `old`, more than [`ASIDE_AT_MOST`] of it
+    /// would be set aside, or memory cannot be had. The same record as [`Record::assemble`]
+    /// either way.
+    pub fn assemble_over(
+        top: &[Top],
+        pieces: &[Piece],
+        old: &mut Record,
+        remap: &(dyn Fn(Link) -> Link + Sync),
+    ) -> bool {
+        if old.links_only || pieces.iter().any(|p| p.own.links_only) {
+            return false;
+        }
+        let Some(jobs) = layout(top, pieces, false) else {
+            return false;
+        };
+        let end = old.end();
+        // Where each job starts; every old stretch inside the old record.
+        let mut starts = Vec::with_capacity(jobs.len());
+        let mut at = Pos::default();
+        for (_, e) in &jobs {
+            starts.push(at);
+            at = at.after(*e);
+        }
+        let olds = || {
+            jobs.iter()
+                .filter_map(|(j, _)| match j {
+                    Job::Piece(p) => Some(p.holes.iter().map(|h| (h.from, h.to))),
+                    Job::Split(..) => None,
+                })
+                .flatten()
+        };
+        let within = |a: Pos, b: Pos| {
+            a.ops <= b.ops
+                && a.links <= b.links
+                && a.sized <= b.sized
+                && b.ops <= end.ops
+                && b.links <= end.links
+                && b.sized <= end.sized
+        };
+        if !olds().all(|(a, b)| within(a, b)) {
+            return false;
+        }
+        let holes = olds().count();
+        // Which stay: the heaviest run of them in the old order.
+        let Some(stay) = in_order(olds, holes) else {
+            return false;
+        };
+        let mut aside_size = Extent::default();
+        for ((a, b), &keep) in olds().zip(&stay) {
+            if !keep {
+                aside_size = aside_size + a.to(b);
+            }
+        }
+        let total = at;
+        if Record::bytes_of(aside_size) as f64 > ASIDE_AT_MOST * old.bytes() as f64 {
+            return false;
+        }
+        let more = |len: usize, want: u64| (want as usize).saturating_sub(len);
+        let mut aside = Record::default();
+        if old
+            .ops
+            .try_reserve_exact(more(old.ops.len(), total.ops))
+            .is_err()
+            || (old.links)
+                .try_reserve_exact(more(old.links.len(), total.links))
+                .is_err()
+            || (old.sized)
+                .try_reserve_exact(more(old.sized.len(), total.sized))
+                .is_err()
+            || aside
+                .ops
+                .try_reserve_exact(aside_size.ops as usize)
+                .is_err()
+            || (aside.links)
+                .try_reserve_exact(aside_size.links as usize)
+                .is_err()
+            || (aside.sized)
+                .try_reserve_exact(aside_size.sized as usize)
+                .is_err()
+        {
+            return false;
+        }
+        // Each stretch of a job in order: `(hole, from, to, place)`, `hole` the index of an
+        // old stretch among all of them, `None` for the piece's own.
+        let stretches = |k: usize, hole: usize, out: &mut Vec<(Option<usize>, Pos, Pos, Pos)>| {
+            out.clear();
+            let Job::Piece(piece) = jobs[k].0 else {
+                return;
+            };
+            let (mut own, mut at) = (Pos::default(), starts[k]);
+            for (i, h) in piece.holes.iter().enumerate() {
+                out.push((None, own, h.at, at));
+                at = at.after(own.to(h.at));
+                out.push((Some(hole + i), h.from, h.to, at));
+                at = at.after(h.from.to(h.to));
+                own = h.at;
+            }
+            out.push((None, own, piece.own.end(), at));
+        };
+        let hole_of = |k: usize| match jobs[k].0 {
+            Job::Piece(p) => p.holes.len(),
+            Job::Split(..) => 0,
+        };
+        // Set aside what is out of order, before anything moves.
+        let mut buf = Vec::new();
+        let mut hole = 0;
+        for k in 0..jobs.len() {
+            stretches(k, hole, &mut buf);
+            hole += hole_of(k);
+            for &(h, a, b, _) in &buf {
+                if h.is_some_and(|h| !stay[h]) {
+                    let g = |x: u64, y: u64| x as usize..y as usize;
+                    aside.ops.extend_from_slice(&old.ops[g(a.ops, b.ops)]);
+                    let links = &old.links[g(a.links, b.links)];
+                    aside.links.extend(links.iter().map(|&l| remap(l)));
+                    aside
+                        .sized
+                        .extend_from_slice(&old.sized[g(a.sized, b.sized)]);
+                }
+            }
+        }
+        let (n_ops, n_links, n_sized) = (
+            total.ops as usize,
+            total.links as usize,
+            total.sized as usize,
+        );
+        old.ops.resize(old.ops.len().max(n_ops), 0);
+        let blank = Link {
+            recv: 0,
+            src: 0,
+            ff: 0.0,
+        };
+        old.links.resize(old.links.len().max(n_links), blank);
+        old.sized
+            .resize(old.sized.len().max(n_sized), Extent::default());
+        // The stretches that stay: those moving left (or staying put) first to last, then
+        // those moving right last to first, so that none overwrites what is still to be read.
+        let mut move_one = |a: Pos, b: Pos, to: Pos, back: bool| {
+            let e = a.to(b);
+            let go = |x: u64, y: u64| back == (y > x);
+            if go(a.ops, to.ops) && a.ops != to.ops {
+                let r = a.ops as usize..b.ops as usize;
+                old.ops.copy_within(r, to.ops as usize);
+            }
+            if go(a.sized, to.sized) && a.sized != to.sized {
+                let r = a.sized as usize..b.sized as usize;
+                old.sized.copy_within(r, to.sized as usize);
+            }
+            if go(a.links, to.links) {
+                let (from, to) = (a.links as usize, to.links as usize);
+                let l = &mut old.links;
+                if back {
+                    (0..e.links as usize)
+                        .rev()
+                        .for_each(|i| l[to + i] = remap(l[from + i]));
+                } else {
+                    (0..e.links as usize).for_each(|i| l[to + i] = remap(l[from + i]));
+                }
+            }
+        };
+        let mut hole = 0;
+        for k in 0..jobs.len() {
+            stretches(k, hole, &mut buf);
+            hole += hole_of(k);
+            for &(h, a, b, to) in &buf {
+                if h.is_some_and(|h| stay[h]) {
+                    move_one(a, b, to, false);
+                }
+            }
+        }
+        let mut hole = holes;
+        for k in (0..jobs.len()).rev() {
+            hole -= hole_of(k);
+            stretches(k, hole, &mut buf);
+            for &(h, a, b, to) in buf.iter().rev() {
+                if h.is_some_and(|h| stay[h]) {
+                    move_one(a, b, to, true);
+                }
+            }
+        }
+        // Then what was set aside, and what the pieces made themselves, around them.
+        let put = |old: &mut Record, rec: &Record, a: Pos, b: Pos, to: Pos| {
+            let g = |x: u64, y: u64| x as usize..y as usize;
+            let d = |at: u64, x: u64, y: u64| at as usize..(at + y - x) as usize;
+            old.ops[d(to.ops, a.ops, b.ops)].copy_from_slice(&rec.ops[g(a.ops, b.ops)]);
+            old.links[d(to.links, a.links, b.links)]
+                .copy_from_slice(&rec.links[g(a.links, b.links)]);
+            old.sized[d(to.sized, a.sized, b.sized)]
+                .copy_from_slice(&rec.sized[g(a.sized, b.sized)]);
+        };
+        let (mut hole, mut set) = (0, Pos::default());
+        for k in 0..jobs.len() {
+            match jobs[k].0 {
+                Job::Split(code, e) => {
+                    let to = starts[k];
+                    old.ops[to.ops as usize] = code;
+                    if let Some(e) = e {
+                        old.sized[to.sized as usize] = e;
+                    }
+                }
+                Job::Piece(piece) => {
+                    stretches(k, hole, &mut buf);
+                    for &(h, a, b, to) in &buf {
+                        match h {
+                            None => put(old, &piece.own, a, b, to),
+                            Some(h) if !stay[h] => {
+                                let next = set.after(a.to(b));
+                                put(old, &aside, set, next, to);
+                                set = next;
+                            }
+                            Some(_) => {}
+                        }
+                    }
+                }
+            }
+            hole += hole_of(k);
+        }
+        old.ops.truncate(n_ops);
+        old.links.truncate(n_links);
+        old.sized.truncate(n_sized);
+        true
+    }
+}
+
+/// `e` as a record of the links alone holds it (`links_only`), or whole.
+fn kept(e: Extent, links_only: bool) -> Extent {
+    if links_only {
+        Extent {
+            links: e.links,
+            ..Extent::default()
+        }
+    } else {
+        e
+    }
+}
+
+/// A part of an assembled record ([`layout`]): a split's own entry (its op code, and its size
+/// when sized), or a piece with its stretches.
+enum Job<'p> {
+    Split(u8, Option<Extent>),
+    Piece(&'p Piece),
+}
+
+/// The parts of a refinement made in parts, in order, each with its extent; `None` when the
+/// top does not close every split it opens.
+fn layout<'p>(
+    top: &[Top],
+    pieces: &'p [Piece],
+    links_only: bool,
+) -> Option<Vec<(Job<'p>, Extent)>> {
+    let kept = |e: Extent| kept(e, links_only);
+    // The extents of the top's splits, and whether each is sized.
+    let mut split_extent = vec![(Extent::default(), false); top.len()];
+    let mut open: Vec<(usize, Extent)> = Vec::new();
+    let mut sum = Extent::default();
+    for (i, t) in top.iter().enumerate() {
+        match *t {
+            Top::Open(..) => {
+                open.push((i, sum));
+                sum = Extent::default();
+            }
+            Top::Piece(p) => sum = sum + kept(pieces.get(p)?.extent()),
+            Top::Close => {
+                let (at, outer) = open.pop()?;
+                let mut e = sum
+                    + kept(Extent {
+                        ops: 1,
+                        links: 0,
+                        sized: 1,
+                    });
+                let sized = e.ops >= SIZED_AT && !links_only;
+                if !sized {
+                    e.sized -= u64::from(!links_only);
+                }
+                split_extent[at] = (e, sized);
+                sum = outer + e;
+            }
+        }
+    }
+    let mut jobs = Vec::with_capacity(top.len());
+    for (i, t) in top.iter().enumerate() {
+        match *t {
+            Top::Open(op, n) => {
+                let (e, sized) = split_extent[i];
+                let code =
+                    op.code() | if n == 4 { FOUR } else { 0 } | if sized { SIZED } else { 0 };
+                let size = Extent {
+                    ops: 1,
+                    links: 0,
+                    sized: u64::from(sized),
+                };
+                if !links_only {
+                    jobs.push((Job::Split(code, sized.then_some(e)), size));
+                }
+            }
+            Top::Piece(p) => jobs.push((Job::Piece(&pieces[p]), kept(pieces[p].extent()))),
+            Top::Close => {}
+        }
+    }
+    Some(jobs)
 }
 
 impl Record {
@@ -779,6 +1097,115 @@ mod tests {
             assert_eq!(got.as_ref(), Some(&want), "links only: {links_only}");
             // Without the other record, nothing is made up for its stretches.
             assert!(Record::assemble(&parts, &p, links_only, None).is_none());
+            // Over the old record's memory: refused, the old record left as it was, for pieces
+            // of links alone, and here for more than half of it out of order (the large
+            // subtree used twice).
+            let mut over = old.clone();
+            assert!(!Record::assemble_over(&parts, &p, &mut over, &remap));
+            assert_eq!(over, old);
         }
+    }
+
+    #[test]
+    fn assembled_over_the_old_record_as_into_fresh_memory() {
+        let mut old = Record::default();
+        small(&mut old, 0);
+        large(&mut old, 0);
+        small(&mut old, 7);
+        large(&mut old, 7);
+        let (mut cuts, mut at) = (vec![Pos::default()], Pos::default());
+        while at != old.end() {
+            at = old.skip(at);
+            cuts.push(at);
+        }
+        assert_eq!(cuts.len(), 5);
+        let stretch = |k: usize| (cuts[k], cuts[k + 1]);
+        let remap = |l: Link| Link {
+            recv: l.recv * 3 + 1,
+            ..l
+        };
+        // Pieces that keep some of the old subtrees, in order, and add their own before,
+        // between and after them: the new record longer than the old (its stretches move
+        // right), shorter (they move left), or both in turn.
+        type Plan = Vec<Vec<Result<usize, u32>>>;
+        let plans: Vec<Plan> = vec![
+            vec![vec![Ok(0), Ok(1)], vec![Err(1)], vec![Ok(2), Ok(3)]],
+            vec![
+                vec![Err(2), Err(3), Ok(0)],
+                vec![Ok(1), Err(1)],
+                vec![Ok(3)],
+            ],
+            vec![vec![Ok(1)], vec![Ok(3)]],
+            vec![vec![Ok(0)], vec![], vec![Err(3), Ok(2), Ok(3)]],
+            vec![vec![Err(1), Err(2)], vec![Err(3)]],
+            // Out of the old order: the small subtrees are set aside, the large ones move in
+            // place.
+            vec![vec![Ok(1)], vec![Ok(0), Err(2)], vec![Ok(3), Ok(2)]],
+            vec![vec![Ok(1), Ok(0)], vec![Err(1), Ok(3), Ok(2), Ok(2)]],
+        ];
+        for plan in plans {
+            let mut p: Vec<Piece> = Vec::new();
+            let mut parts = vec![Top::Open(Op::SplitSelf, plan.len())];
+            for (i, items) in plan.iter().enumerate() {
+                let mut piece = Piece::new(Record::default());
+                let s = piece.open_split(Op::SplitRecv, 2);
+                for item in items {
+                    match *item {
+                        Ok(k) => piece.copy_from(stretch(k).0, stretch(k).1),
+                        Err(1) => small(&mut piece.own, 50),
+                        Err(2) => large(&mut piece.own, 60),
+                        Err(_) => piece.push(Op::Link, Some(link(70))),
+                    }
+                }
+                piece.push(Op::Cull, None);
+                piece.close_split(s);
+                p.push(piece);
+                parts.push(Top::Piece(i));
+            }
+            parts.push(Top::Close);
+            let want = Record::assemble(&parts, &p, false, Some((&old, &remap))).expect("fresh");
+            let mut over = old.clone();
+            assert!(
+                Record::assemble_over(&parts, &p, &mut over, &remap),
+                "{plan:?}"
+            );
+            assert_eq!(over, want, "{plan:?}");
+        }
+        // The large subtrees used four times: more than half set aside, refused, the old
+        // record as it was.
+        let mut p = Piece::new(Record::default());
+        for k in [3, 3, 1, 1] {
+            p.copy_from(stretch(k).0, stretch(k).1);
+        }
+        let parts = [Top::Piece(0)];
+        let mut over = old.clone();
+        assert!(!Record::assemble_over(&parts, &[p], &mut over, &remap));
+        assert_eq!(over, old);
+    }
+
+    #[test]
+    fn the_heaviest_run_in_order_stays() {
+        let at = |ops: u64| Pos {
+            ops,
+            links: ops / 2,
+            sized: 0,
+        };
+        let run = |st: &[(u64, u64)]| {
+            let v: Vec<(Pos, Pos)> = st.iter().map(|&(a, b)| (at(a), at(b))).collect();
+            in_order(|| v.iter().copied(), v.len()).expect("memory")
+        };
+        // Written in the order 100-110, 0-90, 90-100, 110-120: the long stretch leads the run
+        // that stays, the short one before it is set aside (taking the first that comes, as
+        // a greedy choice would, sets aside the long one).
+        assert_eq!(
+            run(&[(100, 110), (0, 90), (90, 100), (110, 120)]),
+            [false, true, true, true]
+        );
+        // A stretch used twice stays once; one inside another cannot follow it.
+        assert_eq!(run(&[(0, 50), (0, 50)]), [true, false]);
+        assert_eq!(run(&[(0, 50), (10, 20)]), [true, false]);
+        // Empty stretches go anywhere in order.
+        assert_eq!(run(&[(5, 5), (0, 5), (5, 5)]), [false, true, true]);
+        assert!(run(&[]).is_empty());
     }
 }

@@ -19,7 +19,7 @@ use radiant_visibility::Visibility;
 use rayon::prelude::*;
 
 use super::edit::Before;
-use super::record::{Op, Piece, Pos, Record, Top as Part};
+use super::record::{Extent, Op, Piece, Pos, Record, Top as Part};
 use super::tree::Tree;
 use crate::form_factors::{FormFactorKind, analytic::point_to_triangle, sample_triangle};
 use crate::mesh::Mesh;
@@ -180,6 +180,40 @@ impl Replay {
     }
 }
 
+/// A refinement made in parts, not yet put together: the splits above the parts, and the
+/// parts with the stretches of the record before an edit that they keep. Its size is known
+/// before any of its memory is taken ([`Walk::extent`]).
+pub(crate) struct Walk {
+    top: Vec<Part>,
+    pieces: Vec<Piece>,
+    links_only: bool,
+    extent: Extent,
+}
+
+impl Walk {
+    /// The size of the record it makes.
+    pub fn extent(&self) -> Extent {
+        self.extent
+    }
+
+    /// Put together into fresh memory, the stretches copied from `old` (the record before an
+    /// edit) with their links mapped; `None` when the memory cannot be had, or stretches are
+    /// held without `old`.
+    pub fn assemble(
+        &self,
+        old: Option<(&Record, &(dyn Fn(Link) -> Link + Sync))>,
+    ) -> Option<Record> {
+        Record::assemble(&self.top, &self.pieces, self.links_only, old)
+    }
+
+    /// Put together in the memory of `old`, the record before an edit, which becomes this
+    /// record ([`Record::assemble_over`]); `false`, with `old` as it was, when that cannot be
+    /// done (then [`Walk::assemble`]).
+    pub fn assemble_over(&self, old: &mut Record, remap: &(dyn Fn(Link) -> Link + Sync)) -> bool {
+        !self.links_only && Record::assemble_over(&self.top, &self.pieces, old, remap)
+    }
+}
+
 /// How much of a refinement was computed, and how much kept from the one before an edit.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RefineStats {
@@ -222,6 +256,16 @@ impl Refiner<'_> {
     /// would be more than `max_links` or it was stopped. `progress(done, total)` is called as
     /// parts finish.
     pub fn build(&self, progress: &(dyn Fn(usize, usize) + Sync)) -> Option<(Record, RefineStats)> {
+        let (walk, stats) = self.walk(progress)?;
+        let remap = |l: Link| self.before.map_or(l, |b| b.remap(l));
+        let old = self
+            .before
+            .map(|b| (b.record, &remap as &(dyn Fn(Link) -> Link + Sync)));
+        Some((walk.assemble(old)?, stats))
+    }
+
+    /// [`Refiner::build`] without putting its parts together: see [`Walk`].
+    pub fn walk(&self, progress: &(dyn Fn(usize, usize) + Sync)) -> Option<(Walk, RefineStats)> {
         let root = self.tree.root(self.mesh);
         // The top of the recursion, breadth first into at least FRONTIER pieces of work; each
         // level's splits name their children's place in the next level. In an edit, a pair the
@@ -299,16 +343,20 @@ impl Refiner<'_> {
         }
         let mut top = Vec::with_capacity(levels.iter().map(Vec::len).sum::<usize>() * 2);
         depth_first(&levels, 0, 0, &mut top);
-        let remap = |l: Link| self.before.map_or(l, |b| b.remap(l));
-        let old = self
-            .before
-            .map(|b| (b.record, &remap as &(dyn Fn(Link) -> Link + Sync)));
-        let record = Record::assemble(&top, &pieces, !self.keep, old)?;
         let stats = RefineStats {
             computed: shared.computed.load(Ordering::Relaxed),
             kept: shared.kept.load(Ordering::Relaxed),
         };
-        Some((record, stats))
+        let extent = Record::extent_of(&top, &pieces, !self.keep)?;
+        Some((
+            Walk {
+                top,
+                pieces,
+                links_only: !self.keep,
+                extent,
+            },
+            stats,
+        ))
     }
 
     /// An empty piece: whole, or the links alone.
