@@ -36,6 +36,36 @@ const SIZED: u8 = 16;
 /// its order); with more, a record in fresh memory is no dearer.
 pub const ASIDE_AT_MOST: f64 = 0.5;
 
+/// Calls its argument with `(from, to, place)` of each old stretch that stays, first to last
+/// (`false`) or last to first (`true`).
+type Staying<'a> = dyn Fn(bool, &mut dyn FnMut(Pos, Pos, Pos)) + Sync + 'a;
+
+/// Moves the stretches of one of a record's arrays (`pick` reads their places in it) that
+/// `each` yields, each element through `map`: those moving left (or staying put), first to
+/// last, then those moving right, last to first. The stretches are in order and apart both
+/// where they come from and where they go, so none overwrites what is still to be read.
+fn shift<T: Copy>(
+    arr: &mut [T],
+    pick: fn(Pos) -> u64,
+    map: Option<&(dyn Fn(T) -> T + Sync)>,
+    each: &Staying<'_>,
+) {
+    for back in [false, true] {
+        each(back, &mut |a, b, to| {
+            let (x, y, t) = (pick(a) as usize, pick(b) as usize, pick(to) as usize);
+            if back != (t > x) {
+                return;
+            }
+            match map {
+                None if t != x => arr.copy_within(x..y, t),
+                None => {}
+                Some(m) if back => (0..y - x).rev().for_each(|i| arr[t + i] = m(arr[x + i])),
+                Some(m) => (0..y - x).for_each(|i| arr[t + i] = m(arr[x + i])),
+            }
+        });
+    }
+}
+
 /// Which of the stretches `[from, to)` of one record that `olds` yields (`n` of them, in the
 /// order they are written) stay in place in [`Record::assemble_over`]: a heaviest run of them
 /// (by bytes) that is in the record's own order, its stretches apart, found as a weighted
@@ -172,6 +202,14 @@ impl Pos {
             ops: self.ops + e.ops,
             links: self.links + e.links,
             sized: self.sized + e.sized,
+        }
+    }
+
+    fn before(self, e: Extent) -> Pos {
+        Pos {
+            ops: self.ops - e.ops,
+            links: self.links - e.links,
+            sized: self.sized - e.sized,
         }
     }
 
@@ -468,14 +506,37 @@ impl Record {
             return false;
         }
         let holes = olds().count();
-        // Which stay: the heaviest run of them in the old order.
-        let Some(stay) = in_order(olds, holes) else {
-            return false;
+        // Which stay: each that follows the last one kept, when that sets little aside (a
+        // level edit: 1 MB of 0.5 GB), else the heaviest run of them in the old order.
+        let aside_of = |stay: &[bool]| {
+            let mut e = Extent::default();
+            for ((a, b), &keep) in olds().zip(stay) {
+                if !keep {
+                    e = e + a.to(b);
+                }
+            }
+            e
         };
-        let mut aside_size = Extent::default();
-        for ((a, b), &keep) in olds().zip(&stay) {
-            if !keep {
-                aside_size = aside_size + a.to(b);
+        let mut stay = Vec::new();
+        if stay.try_reserve_exact(holes).is_err() {
+            return false;
+        }
+        let mut last = Pos::default();
+        stay.extend(olds().map(|(a, b)| {
+            let keep = a.ops >= last.ops && a.links >= last.links && a.sized >= last.sized;
+            if keep {
+                last = b;
+            }
+            keep
+        }));
+        let mut aside_size = aside_of(&stay);
+        if Record::bytes_of(aside_size) > old.bytes() / 64 {
+            let Some(run) = in_order(olds, holes) else {
+                return false;
+            };
+            let e = aside_of(&run);
+            if Record::bytes_of(e) < Record::bytes_of(aside_size) {
+                (stay, aside_size) = (run, e);
             }
         }
         let total = at;
@@ -507,43 +568,16 @@ impl Record {
         {
             return false;
         }
-        // Each stretch of a job in order: `(hole, from, to, place)`, `hole` the index of an
-        // old stretch among all of them, `None` for the piece's own.
-        let stretches = |k: usize, hole: usize, out: &mut Vec<(Option<usize>, Pos, Pos, Pos)>| {
-            out.clear();
-            let Job::Piece(piece) = jobs[k].0 else {
-                return;
-            };
-            let (mut own, mut at) = (Pos::default(), starts[k]);
-            for (i, h) in piece.holes.iter().enumerate() {
-                out.push((None, own, h.at, at));
-                at = at.after(own.to(h.at));
-                out.push((Some(hole + i), h.from, h.to, at));
-                at = at.after(h.from.to(h.to));
-                own = h.at;
-            }
-            out.push((None, own, piece.own.end(), at));
-        };
-        let hole_of = |k: usize| match jobs[k].0 {
-            Job::Piece(p) => p.holes.len(),
-            Job::Split(..) => 0,
-        };
         // Set aside what is out of order, before anything moves.
-        let mut buf = Vec::new();
-        let mut hole = 0;
-        for k in 0..jobs.len() {
-            stretches(k, hole, &mut buf);
-            hole += hole_of(k);
-            for &(h, a, b, _) in &buf {
-                if h.is_some_and(|h| !stay[h]) {
-                    let g = |x: u64, y: u64| x as usize..y as usize;
-                    aside.ops.extend_from_slice(&old.ops[g(a.ops, b.ops)]);
-                    let links = &old.links[g(a.links, b.links)];
-                    aside.links.extend(links.iter().map(|&l| remap(l)));
-                    aside
-                        .sized
-                        .extend_from_slice(&old.sized[g(a.sized, b.sized)]);
-                }
+        for ((a, b), &keep) in olds().zip(&stay) {
+            if !keep {
+                let g = |x: u64, y: u64| x as usize..y as usize;
+                aside.ops.extend_from_slice(&old.ops[g(a.ops, b.ops)]);
+                let links = &old.links[g(a.links, b.links)];
+                aside.links.extend(links.iter().map(|&l| remap(l)));
+                aside
+                    .sized
+                    .extend_from_slice(&old.sized[g(a.sized, b.sized)]);
             }
         }
         let (n_ops, n_links, n_sized) = (
@@ -560,51 +594,54 @@ impl Record {
         old.links.resize(old.links.len().max(n_links), blank);
         old.sized
             .resize(old.sized.len().max(n_sized), Extent::default());
-        // The stretches that stay: those moving left (or staying put) first to last, then
-        // those moving right last to first, so that none overwrites what is still to be read.
-        let mut move_one = |a: Pos, b: Pos, to: Pos, back: bool| {
-            let e = a.to(b);
-            let go = |x: u64, y: u64| back == (y > x);
-            if go(a.ops, to.ops) && a.ops != to.ops {
-                let r = a.ops as usize..b.ops as usize;
-                old.ops.copy_within(r, to.ops as usize);
-            }
-            if go(a.sized, to.sized) && a.sized != to.sized {
-                let r = a.sized as usize..b.sized as usize;
-                old.sized.copy_within(r, to.sized as usize);
-            }
-            if go(a.links, to.links) {
-                let (from, to) = (a.links as usize, to.links as usize);
-                let l = &mut old.links;
+        // Each old stretch with its place, `f(hole, from, to, place)` (`hole` its number among
+        // them all), first to last or last to first: a piece's own stretches lie around them.
+        let each = |back: bool, f: &mut dyn FnMut(usize, Pos, Pos, Pos)| {
+            let mut hole = if back { holes } else { 0 };
+            for k in 0..jobs.len() {
+                let k = if back { jobs.len() - 1 - k } else { k };
+                let (Job::Piece(piece), e) = jobs[k] else {
+                    continue;
+                };
                 if back {
-                    (0..e.links as usize)
-                        .rev()
-                        .for_each(|i| l[to + i] = remap(l[from + i]));
+                    // From the job's end: its own stretch after each old one comes first.
+                    let (mut end, mut own) = (starts[k].after(e), piece.own.end());
+                    for h in piece.holes.iter().rev() {
+                        hole -= 1;
+                        end = end.before(h.at.to(own)).before(h.from.to(h.to));
+                        f(hole, h.from, h.to, end);
+                        own = h.at;
+                    }
                 } else {
-                    (0..e.links as usize).for_each(|i| l[to + i] = remap(l[from + i]));
+                    let (mut at, mut own) = (starts[k], Pos::default());
+                    for h in &piece.holes {
+                        at = at.after(own.to(h.at));
+                        f(hole, h.from, h.to, at);
+                        at = at.after(h.from.to(h.to));
+                        own = h.at;
+                        hole += 1;
+                    }
                 }
             }
         };
-        let mut hole = 0;
-        for k in 0..jobs.len() {
-            stretches(k, hole, &mut buf);
-            hole += hole_of(k);
-            for &(h, a, b, to) in &buf {
-                if h.is_some_and(|h| stay[h]) {
-                    move_one(a, b, to, false);
+        let staying = |back: bool, f: &mut dyn FnMut(Pos, Pos, Pos)| {
+            each(back, &mut |h, a, b, to| {
+                if stay[h] {
+                    f(a, b, to);
                 }
-            }
-        }
-        let mut hole = holes;
-        for k in (0..jobs.len()).rev() {
-            hole -= hole_of(k);
-            stretches(k, hole, &mut buf);
-            for &(h, a, b, to) in buf.iter().rev() {
-                if h.is_some_and(|h| stay[h]) {
-                    move_one(a, b, to, true);
-                }
-            }
-        }
+            });
+        };
+        // The stretches that stay move, each array on its own thread.
+        let (ops, links, sized) = (&mut old.ops, &mut old.links, &mut old.sized);
+        rayon::join(
+            || shift(ops, |p| p.ops, None, &staying),
+            || {
+                rayon::join(
+                    || shift(links, |p| p.links, Some(remap), &staying),
+                    || shift(sized, |p| p.sized, None, &staying),
+                )
+            },
+        );
         // Then what was set aside, and what the pieces made themselves, around them.
         let put = |old: &mut Record, rec: &Record, a: Pos, b: Pos, to: Pos| {
             let g = |x: u64, y: u64| x as usize..y as usize;
@@ -615,32 +652,33 @@ impl Record {
             old.sized[d(to.sized, a.sized, b.sized)]
                 .copy_from_slice(&rec.sized[g(a.sized, b.sized)]);
         };
-        let (mut hole, mut set) = (0, Pos::default());
-        for k in 0..jobs.len() {
-            match jobs[k].0 {
+        let mut set = Pos::default();
+        each(false, &mut |h, a, b, to| {
+            if !stay[h] {
+                let next = set.after(a.to(b));
+                put(old, &aside, set, next, to);
+                set = next;
+            }
+        });
+        for (k, (job, _)) in jobs.iter().enumerate() {
+            let to = starts[k];
+            match *job {
                 Job::Split(code, e) => {
-                    let to = starts[k];
                     old.ops[to.ops as usize] = code;
                     if let Some(e) = e {
                         old.sized[to.sized as usize] = e;
                     }
                 }
                 Job::Piece(piece) => {
-                    stretches(k, hole, &mut buf);
-                    for &(h, a, b, to) in &buf {
-                        match h {
-                            None => put(old, &piece.own, a, b, to),
-                            Some(h) if !stay[h] => {
-                                let next = set.after(a.to(b));
-                                put(old, &aside, set, next, to);
-                                set = next;
-                            }
-                            Some(_) => {}
-                        }
+                    let (mut at, mut own) = (to, Pos::default());
+                    for h in &piece.holes {
+                        put(old, &piece.own, own, h.at, at);
+                        at = at.after(own.to(h.at)).after(h.from.to(h.to));
+                        own = h.at;
                     }
+                    put(old, &piece.own, own, piece.own.end(), at);
                 }
             }
-            hole += hole_of(k);
         }
         old.ops.truncate(n_ops);
         old.links.truncate(n_links);
