@@ -1,7 +1,7 @@
 //! Helpers shared by the CLI tests: the binary and scratch directories.
 #![allow(dead_code)]
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 /// The `radiant` binary of this build.
@@ -9,11 +9,40 @@ pub fn radiant() -> Command {
     Command::new(env!("CARGO_BIN_EXE_radiant"))
 }
 
-/// A fresh scratch directory path (removed if it exists), unique to this process.
-pub fn tmp(name: &str) -> PathBuf {
+/// A scratch directory's path, unique to this process; the directory is removed when this is
+/// dropped, also when the test fails.
+pub struct Scratch(PathBuf);
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for Scratch {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.0.as_os_str()
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// A fresh scratch directory path (removed if it exists, and again when dropped).
+pub fn tmp(name: &str) -> Scratch {
     let dir = std::env::temp_dir().join(format!("radiant-cli-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    dir
+    Scratch(dir)
 }
 
 /// Runs `radiant` with `args` and `--out out`; returns its stdout, failing the test with its
