@@ -51,7 +51,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         None => {
             let b = ClusterBake::new(&scene, &params, &cp, &|_, _, _| {}, None)?;
             if let Some(c) = &checkpoint {
+                let t = Instant::now();
                 b.write_checkpoint(c)?;
+                println!(
+                    "checkpoint written in {:.2} s: {:.0} MB",
+                    t.elapsed().as_secs_f64(),
+                    std::fs::metadata(c)?.len() as f64 / 1e6
+                );
             }
             b
         }
