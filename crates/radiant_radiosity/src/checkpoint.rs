@@ -504,7 +504,6 @@ pub fn read_clustered(path: &Path) -> Result<SavedClustered, BakeError> {
     })
 }
 
-/// Appends the checksum and writes `buf` to `path` atomically (temporary file, fsync, rename).
 /// Writes numbers little-endian: in one piece where that is how they lie in memory (a
 /// level's checkpoint holds 18 M links), else one by one.
 fn put<T: bytemuck::Pod, const N: usize>(
