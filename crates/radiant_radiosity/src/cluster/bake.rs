@@ -1027,7 +1027,7 @@ fn refine_within_budget(
             seed: params.ff.seed,
             max_links,
             stop,
-            before: before.filter(|b| b.eps == eps),
+            before: before.filter(|b| b.old.eps == eps),
             keep: cp.edits,
             replay: None,
         };

@@ -36,18 +36,8 @@ const SPHERES: usize = 32;
 
 /// The bake before a geometry edit, as the edited refinement reads it.
 pub(crate) struct Before<'a> {
-    /// The old tree.
-    pub tree: &'a Tree,
-    /// The old mesh.
-    pub mesh: &'a Mesh,
-    /// The old refinement.
-    pub record: &'a Record,
-    /// The old estimates (per old node).
-    pub bhat: &'a [f64],
-    /// The old largest reflectance per old node.
-    pub rho: &'a [f64],
-    /// The old threshold.
-    pub eps: f64,
+    /// The old scene's parts.
+    pub old: Old<'a>,
     /// Per new node: the old node it is, or [`NONE`].
     old_of_new: Vec<u32>,
     /// Per old node: the new node it is, or [`NONE`].
@@ -178,12 +168,7 @@ impl<'a> Before<'a> {
             settled[n] = same(n) && settled[a as usize] && settled[b as usize];
         }
         Before {
-            tree: old.tree,
-            mesh: old.mesh,
-            record: old.record,
-            bhat: old.bhat,
-            rho: old.rho,
-            eps: old.eps,
+            old,
             old_of_new,
             new_of_old,
             settled,
@@ -193,10 +178,10 @@ impl<'a> Before<'a> {
 
     /// The root pair's cursor: the old root pair, in its place.
     pub fn root_cursor(&self) -> Cursor {
-        if self.record.ops.is_empty() {
+        if self.old.record.ops.is_empty() {
             return Cursor::Unknown;
         }
-        let root = self.tree.root(self.mesh);
+        let root = self.old.tree.root(self.old.mesh);
         Cursor::At {
             pos: Pos::default(),
             r: root,
@@ -264,9 +249,9 @@ impl<'a> Before<'a> {
 
     /// The old children of old node `id` (none for an element).
     fn old_children(&self, id: u32) -> ([u32; 4], usize) {
-        match self.tree.cluster(id) {
+        match self.old.tree.cluster(id) {
             Some(c) => ([c.children[0], c.children[1], 0, 0], 2),
-            None => match self.mesh.nodes[id as usize].first_child {
+            None => match self.old.mesh.nodes[id as usize].first_child {
                 crate::mesh::NO_CHILD => ([0; 4], 0),
                 f => ([f, f + 1, f + 2, f + 3], 4),
             },
@@ -299,7 +284,7 @@ impl<'a> Before<'a> {
             // Near: the pair that holds this one holds its children too.
             return [cur; 4];
         };
-        let old = self.record.op(pos);
+        let old = self.old.record.op(pos);
         if old != op {
             // Split another way: the children may still be found below; linked or culled:
             // nothing below was visited.
@@ -316,7 +301,7 @@ impl<'a> Before<'a> {
         }
         let pairs = self.old_pairs(op, r, s);
         let mut out = [Cursor::Unknown; 4];
-        let mut p = self.record.first_child(pos);
+        let mut p = self.old.record.first_child(pos);
         for k in 0..n {
             out[k] = Cursor::At {
                 pos: p,
@@ -324,7 +309,7 @@ impl<'a> Before<'a> {
                 s: pairs[k].1,
             };
             if k + 1 < n {
-                p = self.record.skip(p);
+                p = self.old.record.skip(p);
             }
         }
         out
@@ -335,12 +320,12 @@ impl<'a> Before<'a> {
     /// names.
     pub fn lookup(&self, r: u32, s: u32, from: Cursor) -> Cursor {
         let (x, y) = (self.old_of_new[r as usize], self.old_of_new[s as usize]);
-        if x == NONE || y == NONE || self.record.ops.is_empty() {
+        if x == NONE || y == NONE || self.old.record.ops.is_empty() {
             return from;
         }
         let (ax, ay) = (self.ancestors(x), self.ancestors(y));
         // Where `a` and `b` stand on the ways up from `x` and `y`.
-        let root = self.tree.root(self.mesh);
+        let root = self.old.tree.root(self.old.mesh);
         let (mut a, mut b, mut pos) = match from {
             Cursor::Near { pos, r, s } => (r, s, pos),
             _ => (root, root, Pos::default()),
@@ -364,7 +349,7 @@ impl<'a> Before<'a> {
             if a == x && b == y {
                 return Cursor::At { pos, r: a, s: b };
             }
-            let op = self.record.op(pos);
+            let op = self.old.record.op(pos);
             let k = match op {
                 Op::Cull | Op::Link | Op::Zero => return Cursor::Above,
                 // The split passed one of the nodes itself: the pair was not visited, but
@@ -396,9 +381,9 @@ impl<'a> Before<'a> {
                     j
                 }
             };
-            let mut p = self.record.first_child(pos);
+            let mut p = self.old.record.first_child(pos);
             for _ in 0..k {
-                p = self.record.skip(p);
+                p = self.old.record.skip(p);
             }
             pos = p;
         }
@@ -410,7 +395,7 @@ impl<'a> Before<'a> {
         let mut n = x;
         while n != NONE {
             out.push(n);
-            n = self.tree.parent[n as usize];
+            n = self.old.tree.parent[n as usize];
         }
         out
     }

@@ -260,7 +260,7 @@ impl Refiner<'_> {
         let remap = |l: Link| self.before.map_or(l, |b| b.remap(l));
         let old = self
             .before
-            .map(|b| (b.record, &remap as &(dyn Fn(Link) -> Link + Sync)));
+            .map(|b| (b.old.record, &remap as &(dyn Fn(Link) -> Link + Sync)));
         Some((walk.assemble(old)?, stats))
     }
 
@@ -490,7 +490,7 @@ impl Refiner<'_> {
             && b.same_pair(r, s, cur)
             && b.clear_of_changes(self.tree, r, s)
         {
-            return Visit::Copy(pos, b.record.skip(pos));
+            return Visit::Copy(pos, b.old.record.skip(pos));
         }
         match self.step(r, s) {
             Step::Cull => Visit::Cull,
@@ -505,11 +505,11 @@ impl Refiner<'_> {
         let Cursor::At { pos, r: ro, s: so } = cur else {
             return None;
         };
-        let op = b.record.op(pos);
+        let op = b.old.record.op(pos);
         if !matches!(op, Op::Link | Op::Zero) || !b.same_pair(r, s, cur) {
             return None;
         }
-        let old = carry_err(b.mesh, b.tree, b.rho, b.bhat, ro, so) / b.eps;
+        let old = carry_err(b.old.mesh, b.old.tree, b.old.rho, b.old.bhat, ro, so) / b.old.eps;
         if self.samples_for(err) != self.samples_for(old) {
             return None;
         }
@@ -525,7 +525,7 @@ impl Refiner<'_> {
             }
         }
         Some(match op {
-            Op::Link => b.record.link(pos).ff,
+            Op::Link => b.old.record.link(pos).ff,
             _ => 0.0,
         })
     }
