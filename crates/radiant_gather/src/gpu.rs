@@ -62,7 +62,7 @@ pub(crate) struct GpuVertex {
     mask: u32,
 }
 
-/// A vertex of an opaque triangle.
+/// The mask value of a vertex whose triangle is opaque (no alpha lookup).
 const NO_MASK: u32 = u32::MAX;
 
 /// An alpha mask as `gather.wgsl` reads it: its image in [`Masks::images`], the sampler

@@ -1,7 +1,8 @@
 //! Radiosity by direct rendering, the lecture's "using direct rendering" (and what
 //! lightmapper.h does): a GPU hemicube gather on wgpu whose receivers are the light map's texels.
 //!
-//! Every iteration is one Jacobi sweep as the notes write it:
+//! Each of the first [`PLAIN_SWEEPS`] iterations is one Jacobi sweep as the notes write it
+//! (every one with [`GatherParams::acceleration`] off; after them, Chebyshev's weighted step):
 //!
 //! ```text
 //! for each receiver i:  H_new[i] = D[i] + Σ_pixels ΔF · B_old(pixel)
@@ -169,8 +170,8 @@ pub enum GatherError {
     /// Nothing in the scene emits light: there is nothing to gather.
     #[error("nothing in the scene emits light (no emissive surface, punctual light or sky)")]
     NoEmitters,
-    /// The scene has nothing static to bake.
-    #[error("the scene has no static triangles to bake")]
+    /// The scene has nothing static to bake (or its alpha masks cut all of it away).
+    #[error("the scene has no static triangles to bake (or its alpha masks cut them all away)")]
     NoGeometry,
     /// Something in the scene the gather does not draw.
     #[error("--method gpu-hemicube does not handle {0} yet; use a CPU method: {CPU_METHODS}")]
@@ -350,7 +351,7 @@ impl GpuGather {
         let emitters = if analytic { &emitters[..] } else { &[] };
         let reflectance = receiver_reflectance(scene, &footprints, &receivers);
         // Alpha masks: cut fragments are not drawn, and shadow rays pass them.
-        let alpha = radiant_scene::AlphaMasks::new(scene).map(std::sync::Arc::new);
+        let alpha = radiant_radiosity::input::masks(scene);
         let gpu_receivers = gpu_receivers(
             scene,
             &frame,
@@ -369,6 +370,11 @@ impl GpuGather {
             .fold(0.0f64, f64::max);
         let (vertices, indices, masks) =
             gpu::vertices(scene, &atlas, &frame, &baked, alpha.as_deref());
+        if indices.is_empty() {
+            // Every triangle cut wholly by its mask: nothing to draw (wgpu refuses empty
+            // vertex buffers), nothing to see.
+            return Err(GatherError::NoGeometry);
+        }
         let sky = match &scene.sky {
             None => gpu::SkyUniform::None,
             Some(Sky::Uniform { radiance }) => gpu::SkyUniform::Uniform(*radiance),

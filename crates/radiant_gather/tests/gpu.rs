@@ -6,7 +6,7 @@
 use std::f64::consts::PI;
 
 use glam::DVec3;
-use radiant_gather::{GatherParams, GpuGather};
+use radiant_gather::{GatherError, GatherParams, GpuGather};
 use radiant_render::GpuContext;
 use radiant_scene::{Scene, Surface, Triangle};
 
@@ -538,4 +538,33 @@ fn an_alpha_masked_blocker_lets_light_through_where_it_is_cut() {
     assert!((got - want).abs() < 0.03 * want, "{got} against {want}");
     assert!((drawn - want).abs() < 0.05 * want, "{drawn} against {want}");
     assert!(blocked < 0.5 * want, "{blocked} against {want}");
+}
+
+#[test]
+fn a_scene_whose_masks_cut_everything_is_refused_with_a_typed_error() {
+    // Every triangle's mask cuts it wholly (its factor's alpha under the cutoff): nothing is
+    // left to draw, which is said, not a panic on empty vertex buffers.
+    let mut triangles = Vec::new();
+    triangles.extend(quad(DVec3::ZERO, DVec3::Z, DVec3::X, 0));
+    triangles.extend(quad(
+        DVec3::new(0.35, 0.6, 0.35),
+        DVec3::X * 0.3,
+        DVec3::Z * 0.3,
+        1,
+    ));
+    let mut surfaces = vec![surface("floor", 0.5, 0.0), surface("light", 0.0, 1.0)];
+    for s in &mut surfaces {
+        s.alpha = radiant_scene::AlphaMode::Mask { cutoff: 0.5 };
+        s.base_color_alpha = 0.0;
+    }
+    let scene = Scene {
+        surfaces,
+        triangles,
+        ..Scene::default()
+    };
+    match GpuGather::with_context(gpu(), &scene, &GatherParams::default()) {
+        Err(GatherError::NoGeometry) => {}
+        Err(e) => panic!("another error: {e}"),
+        Ok(_) => panic!("a scene cut away wholly was gathered"),
+    }
 }
