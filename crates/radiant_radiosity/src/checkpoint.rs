@@ -540,7 +540,8 @@ impl<W: Write> Write for Hashing<W> {
 /// and renames it to `path`, so that a crash leaves the old checkpoint or the new one, never
 /// half of one (the temporary file is removed when writing fails). Streamed through a small
 /// buffer: Sponza's checkpoint with its record is 446 MB, which was first built in memory
-/// (fresh pages, dear on the virtual machine of ARCHITECTURE.md's figures) and then hashed and written, 9.1 s in all.
+/// (fresh pages, dear on the virtual machine of ARCHITECTURE.md's figures) and then hashed
+/// and written, 9.1 s in all.
 fn write_atomically(
     path: &Path,
     body: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
