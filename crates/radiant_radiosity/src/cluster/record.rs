@@ -462,9 +462,9 @@ impl Record {
     /// pages cost about a second per gigabyte to touch (nine the first time), and a level
     /// edit's new record was half a gigabyte held beside the old one. Stretches out of `old`'s
     /// order (an edit that reordered the tree around what moved) are copied aside first; the
-    /// others move in place. `false`, with `old` as it was, when it should not be done: the pieces or `old`
-    /// hold links alone, a stretch is not inside `old`, more than [`ASIDE_AT_MOST`] of it
-    /// would be set aside, or memory cannot be had. The same record as [`Record::assemble`]
+    /// others move in place. `false`, with `old` as it was, when it should not be done: the
+    /// pieces or `old` hold links alone, a stretch is not inside `old`, more than
+    /// [`ASIDE_AT_MOST`] of it would be set aside, or memory cannot be had. The same record as [`Record::assemble`]
     /// either way.
     pub fn assemble_over(
         top: &[Top],
