@@ -464,8 +464,8 @@ impl Record {
     /// order (an edit that reordered the tree around what moved) are copied aside first; the
     /// others move in place. `false`, with `old` as it was, when it should not be done: the
     /// pieces or `old` hold links alone, a stretch is not inside `old`, more than
-    /// [`ASIDE_AT_MOST`] of it would be set aside, or memory cannot be had. The same record as [`Record::assemble`]
-    /// either way.
+    /// [`ASIDE_AT_MOST`] of it would be set aside, or memory cannot be had. The same record
+    /// as [`Record::assemble`] either way.
     pub fn assemble_over(
         top: &[Top],
         pieces: &[Piece],
