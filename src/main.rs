@@ -178,7 +178,7 @@ pub(crate) struct BakeArgs {
 pub(crate) struct HierarchyArgs {
     /// Link hierarchy: `clustered` (volume clusters above triangles, links at any level on both
     /// ends: for levels, and for an editor's geometry edits at any size; checkpoints of
-    /// version 3), `triangles` (every element gathers from a per-triangle hierarchy: every
+    /// version 4), `triangles` (every element gathers from a per-triangle hierarchy: every
     /// solver and form-factor method; checkpoints of version 2), or `auto`:
     /// clustered when the scene has more than 4096 triangles or the per-triangle mesh would
     /// have more than 65 536 elements, and no option needs the per-triangle bake.

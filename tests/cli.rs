@@ -402,7 +402,7 @@ fn a_checkpoint_lets_the_next_bake_skip_form_factors() {
         assert!((a - b).abs() <= 1e-3 * a.abs().max(1e-3), "{a} vs {b}");
     }
     // The clustered hierarchy refuses the per-triangle checkpoint (a typed "rebake"), bakes
-    // afresh and writes its own (version 3), which the next clustered bake resumes from.
+    // afresh and writes its own (version 4), which the next clustered bake resumes from.
     let clustered = || {
         radiant()
             .args(["bake", "--builtin", "cornell-box", "--patch-size", "0.3"])

@@ -1,13 +1,14 @@
 //! Bake checkpoints: the links (form factors), the enclosed-element flags and the solution,
 //! written atomically, so a long bake resumes after a restart without recomputing form factors.
-//! Versions 1 and 2 hold a per-triangle hierarchy ([`read`], [`write`]), version 3 a clustered
-//! one ([`read_clustered`], [`write_clustered`]); each reader refuses the other's files with
-//! [`BakeError::CheckpointHierarchy`].
+//! Versions 1 and 2 hold a per-triangle hierarchy ([`read`], [`write`]), versions 3 and 4 a
+//! clustered one ([`read_clustered`], [`write_clustered`]); each reader refuses the other's
+//! files with [`BakeError::CheckpointHierarchy`].
 //!
-//! Version 3, little-endian: the magic and version; the fingerprint, element, node (mesh nodes
+//! Version 4, little-endian: the magic and version; the fingerprint, element, node (mesh nodes
 //! and clusters) and link counts, and the refinement threshold the links were built with; row
-//! offsets (u64, one per node and one more), sources (u32), form factors (f32), enclosed flags
-//! (u8), radiosity (3 × f64 per element); where the bake kept it for geometry edits, the
+//! offsets (u64, one per node and one more), sources (u32), form factors (f32), each element's
+//! exposed probe points (u8, of [`crate::exposure::POINTS`]), radiosity (3 × f64 per element);
+//! where the bake kept it for geometry edits, the
 //! refinement's record: a hash of the estimates it was refined with, its op and sized-subtree
 //! counts (u64), ops (u8), sized subtrees (3 × u64; its links are the rows' links, found again
 //! by walking the ops); an FNV-1a checksum. A
@@ -106,7 +107,16 @@ pub enum CheckpointError {
 const MAGIC: &[u8; 15] = b"RADIANT-BAKE\0\0\0";
 const VERSION: u8 = 2;
 /// The version of clustered checkpoints.
-const VERSION_CLUSTERED: u8 = 3;
+const VERSION_CLUSTERED: u8 = 4;
+/// The clustered version before exposure: an enclosed flag (u8) per element where version 4
+/// has its exposed points; still read, an enclosed element as none exposed and any other as
+/// all.
+const VERSION_CLUSTERED_FLAGS: u8 = 3;
+
+/// Whether a version holds a clustered hierarchy.
+fn is_clustered(version: u8) -> bool {
+    version == VERSION_CLUSTERED || version == VERSION_CLUSTERED_FLAGS
+}
 
 /// What a checkpoint restores.
 pub struct Saved {
@@ -330,17 +340,18 @@ pub fn read(path: &Path) -> Result<Saved, BakeError> {
     })
 }
 
-/// Reads a checkpoint of one hierarchy (`clustered`: version 3, else 1 or 2) with at least
+/// Reads a checkpoint of one hierarchy (`clustered`: version 3 or 4, else 1 or 2) with at least
 /// `header` bytes after the magic, and checks its checksum; returns the bytes and the version.
 /// The other hierarchy's file is [`BakeError::CheckpointHierarchy`].
 fn open(path: &Path, clustered: bool, header: usize) -> Result<(Vec<u8>, u8), BakeError> {
     let at = || path.display().to_string();
     let data = std::fs::read(path).map_err(|source| CheckpointError::Io { path: at(), source })?;
     let version = (data.len() >= 16 && &data[..15] == MAGIC).then(|| data[15]);
-    let ours = |v: u8| (v == VERSION_CLUSTERED) == clustered;
+    let ours = |v: u8| is_clustered(v) == clustered;
+    let known = |v: u8| matches!(v, 1 | 2) || is_clustered(v);
     match version {
-        Some(v @ (1 | 2 | VERSION_CLUSTERED)) if !ours(v) => return Err(other_hierarchy(path, v)),
-        Some(1 | 2 | VERSION_CLUSTERED) if data.len() >= 16 + header + 8 => {}
+        Some(v) if known(v) && !ours(v) => return Err(other_hierarchy(path, v)),
+        Some(v) if known(v) && data.len() >= 16 + header + 8 => {}
         _ => return Err(CheckpointError::NotACheckpoint { path: at() }.into()),
     }
     let (body, sum) = data.split_at(data.len() - 8);
@@ -362,7 +373,7 @@ fn corrupt(path: &Path, what: &'static str) -> BakeError {
 }
 
 fn other_hierarchy(path: &Path, version: u8) -> BakeError {
-    let (found, needed) = if version == VERSION_CLUSTERED {
+    let (found, needed) = if is_clustered(version) {
         ("clustered", "per-triangle")
     } else {
         ("per-triangle", "clustered")
@@ -387,8 +398,9 @@ pub struct SavedClustered {
     pub nodes: usize,
     /// The links.
     pub rows: Rows,
-    /// Per element: inside closed geometry.
-    pub dead: Vec<bool>,
+    /// Per element: its exposed probe points, of [`crate::exposure::POINTS`] (0: inside
+    /// closed geometry).
+    pub live: Vec<u8>,
     /// Radiosity per element.
     pub radiosity: Vec<Rgb>,
     /// The refinement's record, when the file holds it: the hash of the estimates it was
@@ -403,7 +415,7 @@ pub fn write_clustered(
     fingerprint: u64,
     refinement: f64,
     rows: RowsRef,
-    (dead, radiosity): (&[bool], &[Rgb]),
+    (live, radiosity): (&[u8], &[Rgb]),
     record: Option<(u64, &[u8], &[Extent])>,
 ) -> Result<(), BakeError> {
     let (n, nodes, nl) = (radiosity.len(), rows.row.len() - 1, rows.src.len());
@@ -422,9 +434,7 @@ pub fn write_clustered(
         put(w, rows.row, |r| r.to_le_bytes())?;
         put(w, rows.src, |s| s.to_le_bytes())?;
         put(w, rows.ff, |f| f.to_le_bytes())?;
-        for &d in dead {
-            w.write_all(&[u8::from(d)])?;
-        }
+        w.write_all(live)?;
         put(w, radiosity.as_flattened(), |c| c.to_le_bytes())?;
         if let Some((hash, ops, sized)) = record {
             w.write_all(&hash.to_le_bytes())?;
@@ -445,7 +455,7 @@ pub fn write_clustered(
 /// values); a per-triangle one is [`BakeError::CheckpointHierarchy`].
 pub fn read_clustered(path: &Path) -> Result<SavedClustered, BakeError> {
     let bad = |what: &'static str| corrupt(path, what);
-    let (data, _) = open(path, true, 40)?;
+    let (data, version) = open(path, true, 40)?;
     let body = &data[..data.len() - 8];
     let mut c = Cursor { data: body, at: 16 };
     let fingerprint = c.u64();
@@ -461,7 +471,13 @@ pub fn read_clustered(path: &Path) -> Result<SavedClustered, BakeError> {
     let row: Vec<u64> = (0..=nodes).map(|_| c.u64()).collect();
     let src: Vec<u32> = (0..nl).map(|_| c.u32()).collect();
     let ff: Vec<f32> = (0..nl).map(|_| c.f32()).collect();
-    let dead: Vec<bool> = (0..n).map(|_| c.take::<1>()[0] != 0).collect();
+    let live: Vec<u8> = (0..n).map(|_| c.take::<1>()[0]).collect();
+    let live = if version == VERSION_CLUSTERED_FLAGS {
+        let all = crate::exposure::POINTS as u8;
+        live.iter().map(|&d| if d != 0 { 0 } else { all }).collect()
+    } else {
+        live
+    };
     let radiosity: Vec<Rgb> = (0..n).map(|_| [c.f64(), c.f64(), c.f64()]).collect();
     let record = if expected == len {
         None
@@ -488,6 +504,9 @@ pub fn read_clustered(path: &Path) -> Result<SavedClustered, BakeError> {
         && refinement > 0.0;
     if !header_ok
         || src.iter().any(|&s| s as usize >= nodes)
+        || live
+            .iter()
+            .any(|&l| usize::from(l) > crate::exposure::POINTS)
         || ff.iter().any(|f| !f.is_finite() || *f < 0.0)
         || radiosity.iter().flatten().any(|b| !b.is_finite())
     {
@@ -498,7 +517,7 @@ pub fn read_clustered(path: &Path) -> Result<SavedClustered, BakeError> {
         refinement,
         nodes,
         rows: Rows { row, src, ff },
-        dead,
+        live,
         radiosity,
         record,
     })
@@ -679,5 +698,52 @@ mod tests {
         assert_eq!(saved.links.hidden_row, links.hidden_row);
         assert_eq!(saved.links.hidden_src, links.hidden_src);
         assert_eq!(saved.hierarchy, hierarchy);
+    }
+
+    #[test]
+    fn a_clustered_checkpoint_keeps_exposure_and_version_3_flags_are_still_read() {
+        let path = std::env::temp_dir().join(format!("radiant-v4-{}.ckpt", std::process::id()));
+        let rows = Rows {
+            row: vec![0, 1, 1, 1],
+            src: vec![2],
+            ff: vec![0.25],
+        };
+        let live = [0u8, 4, 9];
+        let b = [[0.1; 3], [0.2; 3], [0.3; 3]];
+        let write = |live: &[u8]| {
+            let rr = RowsRef {
+                row: &rows.row,
+                src: &rows.src,
+                ff: &rows.ff,
+            };
+            write_clustered(&path, 7, 0.02, rr, (live, &b), None).expect("write")
+        };
+        write(&live);
+        let saved = read_clustered(&path).expect("read");
+        assert_eq!(saved.live, live);
+        assert_eq!((saved.rows, saved.radiosity), (rows.clone(), b.to_vec()));
+        // The same file as version 3 wrote it: enclosed flags where the exposure is.
+        let mut data = std::fs::read(&path).expect("written");
+        let at = 16 + 40 + 4 * 8 + 4 + 4;
+        data[15] = VERSION_CLUSTERED_FLAGS;
+        data[at..at + 3].copy_from_slice(&[1, 0, 0]);
+        let body = data.len() - 8;
+        let mut h = Fnv::new();
+        h.bytes(&data[..body]);
+        data[body..].copy_from_slice(&h.0.to_le_bytes());
+        std::fs::write(&path, &data).expect("rewritten");
+        let old = read_clustered(&path).expect("a version-3 file is read");
+        assert_eq!(old.live, [0, 9, 9]);
+        // More exposed points than there are is a corrupt file.
+        write(&[0, 4, 10]);
+        let bad = read_clustered(&path);
+        let _ = std::fs::remove_file(&path);
+        assert!(
+            matches!(
+                bad,
+                Err(BakeError::Checkpoint(CheckpointError::Corrupt { .. }))
+            ),
+            "{bad:?}"
+        );
     }
 }

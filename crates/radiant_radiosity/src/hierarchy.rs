@@ -169,57 +169,29 @@ pub fn build(
 /// Elements whose centroid lies inside closed geometry (the floor under a block): every one of
 /// the cosine-distributed probe rays from them hits a back face. Such elements receive nothing and no
 /// receiver sees them, so they must not dilute the radiosity of the source nodes they belong to.
+/// (The clustered bake measures how much of each element is exposed instead:
+/// [`crate::exposure`].)
 pub fn enclosed_elements(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<bool> {
-    enclosed_elements_keeping(mesh, vis, seed, &|_, _| None)
-}
-
-/// Probe rays per element of [`enclosed_elements`].
-pub(crate) const PROBES: usize = 16;
-
-/// An element's probe rays, origins and directions as cast.
-pub(crate) type Probes = [(glam::Vec3, glam::Vec3); PROBES];
-
-/// [`enclosed_elements`], where `kept(element, probes)` may answer for an element without its
-/// probe rays (origins and directions, as cast) being cast: an edit's element that stayed,
-/// whose probes nothing that moved can reach.
-pub(crate) fn enclosed_elements_keeping(
-    mesh: &Mesh,
-    vis: &dyn Visibility,
-    seed: u64,
-    kept: &(dyn Fn(usize, &Probes) -> Option<bool> + Sync),
-) -> Vec<bool> {
     use rayon::prelude::*;
     (0..mesh.element_count())
         .into_par_iter()
         .map(|leaf| {
             let node = mesh.leaf_node(leaf as u32);
-            let (t, b) = crate::form_factors::basis(node.normal);
             let id = mesh.stable_id(mesh.leaves[leaf]);
             let mut rng = crate::rng::Rng::new(crate::rng::hash(seed ^ 0xDEAD, id, 0));
             let origin = crate::form_factors::ray_origin(node.centroid, node.normal);
-            let probes: Probes = std::array::from_fn(|k| {
-                let k = k as u32;
-                let (u1, u2) = (
-                    (f64::from(k % 4) + rng.f64()) / 4.0,
-                    (f64::from(k / 4) + rng.f64()) / 4.0,
-                );
-                let (r, phi) = (u1.sqrt(), std::f64::consts::TAU * u2);
-                let dir = t * (r * phi.cos())
-                    + b * (r * phi.sin())
-                    + node.normal * (1.0 - u1).max(0.0).sqrt();
-                (origin, dir.as_vec3())
-            });
-            if let Some(enclosed) = kept(leaf, &probes) {
-                return enclosed;
-            }
             // One probe that escapes or meets a front face decides it: not enclosed.
-            probes.iter().all(|&(o, d)| {
-                vis.closest_hit(o, d, f32::INFINITY)
+            (0..PROBES).all(|k| {
+                let dir = crate::exposure::cosine_probe(node.normal, k, 4, &mut rng);
+                vis.closest_hit(origin, dir, f32::INFINITY)
                     .is_some_and(|h| !h.front)
             })
         })
         .collect()
 }
+
+/// Probe rays per element of [`enclosed_elements`].
+const PROBES: usize = 16;
 
 /// How an edited mesh's input triangles match the old ones: by surface name and index within
 /// it (as hashed into the ray seeds) and exact local vertices. A moved triangle is one that

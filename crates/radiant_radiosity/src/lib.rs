@@ -24,6 +24,7 @@
 pub mod bake;
 pub mod checkpoint;
 pub mod cluster;
+pub mod exposure;
 pub mod form_factors;
 pub mod hierarchy;
 pub mod input;

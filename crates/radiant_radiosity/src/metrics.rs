@@ -98,13 +98,37 @@ pub struct SurfaceMean {
 
 /// Per-surface area-weighted means of per-element radiosity.
 pub fn surface_means(surfaces: &[Surface], mesh: &Mesh, b: &[Rgb]) -> Vec<SurfaceMean> {
+    surface_means_with(surfaces, mesh, b, |_| 1.0)
+}
+
+/// Per-surface means of a clustered bake's radiosity, that of each element's exposed part
+/// ([`crate::exposure`]): an element's buried part counts in its surface's area, dark, as a
+/// path tracer that samples the whole surface sees it.
+pub fn surface_means_exposed(
+    surfaces: &[Surface],
+    mesh: &Mesh,
+    b: &[Rgb],
+    live: &[u8],
+) -> Vec<SurfaceMean> {
+    surface_means_with(surfaces, mesh, b, |i| {
+        live.get(i).map_or(1.0, |&l| crate::exposure::fraction(l))
+    })
+}
+
+fn surface_means_with(
+    surfaces: &[Surface],
+    mesh: &Mesh,
+    b: &[Rgb],
+    share: impl Fn(usize) -> f64,
+) -> Vec<SurfaceMean> {
     let mut acc = vec![(0.0, [0.0; 3]); surfaces.len()];
     for (i, &id) in mesh.leaves.iter().enumerate() {
         let node = &mesh.nodes[id as usize];
         let s = mesh.root_surface[node.root as usize] as usize;
         acc[s].0 += node.area;
+        let lit = node.area * share(i);
         for c in 0..3 {
-            acc[s].1[c] += node.area * b[i][c];
+            acc[s].1[c] += lit * b[i][c];
         }
     }
     let s2 = mesh.frame.scale * mesh.frame.scale;

@@ -52,11 +52,24 @@ impl System {
         links: Links,
         dead: &[bool],
     ) -> System {
+        let share: Vec<f64> = dead.iter().map(|&d| if d { 0.0 } else { 1.0 }).collect();
+        Self::exposed(mesh, rho, source, links, &share)
+    }
+
+    /// [`System::new`] with each element's exposed share of its area (0: enclosed) as its
+    /// weight: a clustered bake's exposure ([`crate::exposure`]).
+    pub fn exposed(
+        mesh: &Mesh,
+        rho: Vec<Rgb>,
+        source: Vec<Rgb>,
+        links: Links,
+        share: &[f64],
+    ) -> System {
         let weight: Vec<f64> = mesh
             .leaves
             .iter()
-            .zip(dead)
-            .map(|(&n, &d)| if d { 0.0 } else { mesh.nodes[n as usize].area })
+            .zip(share)
+            .map(|(&n, &s)| mesh.nodes[n as usize].area * s)
             .collect();
         let mut node_weight = vec![0.0; mesh.nodes.len()];
         for (i, n) in mesh.nodes.iter().enumerate().rev() {

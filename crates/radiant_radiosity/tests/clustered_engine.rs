@@ -113,7 +113,7 @@ fn checkpoints_of_the_other_hierarchy_other_geometry_or_damaged_are_typed_errors
         Ok(_) => panic!("a per-triangle checkpoint resumed a clustered bake"),
     }
     match Bake::resume(&scene, &p, &v3) {
-        Err(e @ BakeError::CheckpointHierarchy { version: 3, .. }) => {
+        Err(e @ BakeError::CheckpointHierarchy { version: 4, .. }) => {
             assert!(e.to_string().contains("rebake"), "{e}");
         }
         Err(e) => panic!("expected a typed rebake error, got {e}"),
@@ -383,10 +383,19 @@ fn a_geometry_edit_keeps_what_stayed_of_textures_and_enclosure_bit_for_bit() {
     assert_eq!(differ(b.enclosed(), f.enclosed()), 0, "enclosed elements");
     let under = |b: &ClusterBake| b.enclosed().iter().filter(|&&d| d).count();
     assert!(under(&f) > 0, "the block encloses floor elements");
+    // Its edges cover elements in part: their exposure too is a fresh bake's.
+    assert!(
+        b.exposure() == f.exposure(),
+        "exposure differs from a fresh bake's"
+    );
+    let all = radiant_radiosity::exposure::POINTS as u8;
+    let partial = |b: &ClusterBake| b.exposure().iter().filter(|&&l| l > 0 && l < all).count();
+    assert!(partial(&f) > 0, "the block covers floor elements in part");
     let same_terms = |b: ClusterBake, f: ClusterBake| {
         let (x, y) = (b.finish().system, f.finish().system);
         assert!(x.rho == y.rho, "reflectance differs from a fresh bake's");
         assert!(x.source == y.source, "sources differ from a fresh bake's");
+        assert!(x.weight == y.weight, "weights differ from a fresh bake's");
         x.rho
             .iter()
             .fold((1.0f64, 0.0f64), |(lo, hi), r| (lo.min(r[0]), hi.max(r[0])))

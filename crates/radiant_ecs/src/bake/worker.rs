@@ -11,7 +11,7 @@ use std::sync::{Arc, Mutex, mpsc};
 use std::time::{Duration, Instant};
 
 use radiant_radiosity::cluster::{self, ClusterBake, ClusterParams, Phase};
-use radiant_radiosity::metrics::{SurfaceMean, surface_means};
+use radiant_radiosity::metrics::{SurfaceMean, surface_means, surface_means_exposed};
 use radiant_radiosity::smooth::SmoothField;
 use radiant_radiosity::{Bake, BakeError, BakeParams, Info, Mesh, Rgb, SolveError};
 use radiant_scene::{Light, Scene, Sky, Surface};
@@ -323,6 +323,17 @@ impl Engine {
             Engine::Clustered(b) => (b.radiosity(), b.smooth_field()),
         }
     }
+
+    /// Per-surface means of `radiosity` (from [`Engine::light`]): a clustered bake's counts
+    /// each element's exposed share of its area.
+    fn surface_means(&self, mesh: &Mesh, radiosity: &[Rgb]) -> Vec<SurfaceMean> {
+        match self {
+            Engine::Triangles(_) => surface_means(self.surfaces(), mesh, radiosity),
+            Engine::Clustered(b) => {
+                surface_means_exposed(self.surfaces(), mesh, radiosity, b.exposure())
+            }
+        }
+    }
 }
 
 impl Held {
@@ -465,7 +476,7 @@ fn apply(
 
 fn publish(held: &Held, converged: bool, tx: &mpsc::Sender<Report>) {
     let (radiosity, field) = held.engine.light();
-    let surfaces = surface_means(held.engine.surfaces(), &held.mesh, &radiosity);
+    let surfaces = held.engine.surface_means(&held.mesh, &radiosity);
     let _ = tx.send(Report::Publish(Box::new(Published {
         mesh: held.mesh.clone(),
         radiosity,

@@ -20,7 +20,7 @@ use crate::checkpoint::CheckpointError;
 use crate::hierarchy::RootMatch;
 use crate::input::{self, Lighting};
 use crate::mesh::Mesh;
-use crate::metrics::surface_means;
+use crate::metrics::surface_means_exposed;
 use crate::params::BakeParams;
 use crate::report::{BakeReport, BakeResult, PhaseTimes, TimelinePoint};
 use crate::rng::Fnv;
@@ -292,11 +292,11 @@ impl ClusterBake {
         let mut refined = RefineStats::default();
         let (sys, refinement_used, b, record) = match saved {
             Some(mut sv) => {
-                if sv.dead.len() != n || sv.nodes != tree.len() {
+                if sv.live.len() != n || sv.nodes != tree.len() {
                     return Err(CheckpointError::OtherMesh {
                         elements: n,
                         nodes: tree.len(),
-                        found_elements: sv.dead.len(),
+                        found_elements: sv.live.len(),
                         found_nodes: sv.nodes,
                     }
                     .into());
@@ -318,11 +318,11 @@ impl ClusterBake {
                 let room = sv.rows.src.len() / 64;
                 let _ =
                     (sv.rows.src.try_reserve_exact(room)).and(sv.rows.ff.try_reserve_exact(room));
-                let sys = HierSystem::from_rows(&mesh, &tree, sv.rows, rho, source, sv.dead);
+                let sys = HierSystem::from_rows(&mesh, &tree, sv.rows, rho, source, sv.live);
                 (sys, sv.refinement, Some(sv.radiosity), record)
             }
             None if has_emitters => {
-                let dead = crate::hierarchy::enclosed_elements(&mesh, &bvh, params.ff.seed);
+                let live = crate::exposure::exposure(&mesh, &bvh, params.ff.seed);
                 let inputs = (&mesh, &tree, &bvh as &dyn Visibility, &oracle);
                 let (walk, eps, stats) = refine_within_budget(
                     inputs,
@@ -340,14 +340,15 @@ impl ClusterBake {
                     limit: budget.limit,
                 })?;
                 drop(walk);
-                let sys = HierSystem::new(&mesh, &tree, &record.links, rho, source, dead)?;
+                let sys = HierSystem::new(&mesh, &tree, &record.links, rho, source, live)?;
                 refined = stats;
                 (sys, eps, None, cp.edits.then_some(record))
             }
             None => {
                 warnings
                     .push("no emitters and no lights: nothing to bake, all radiosity is 0".into());
-                let sys = HierSystem::new(&mesh, &tree, &[], rho, source, vec![false; n])?;
+                let all = vec![crate::exposure::POINTS as u8; n];
+                let sys = HierSystem::new(&mesh, &tree, &[], rho, source, all)?;
                 (sys, params.links.refinement, None, None)
             }
         };
@@ -469,11 +470,12 @@ impl ClusterBake {
             || (self.params.time_limit).is_some_and(|l| s.solving >= l)
     }
 
-    /// The current light as a smooth field (for light maps): enclosed elements do not vote.
+    /// The current light as a smooth field (for light maps): each element votes by its exposed
+    /// area, enclosed elements not at all.
     pub fn smooth_field(&self) -> SmoothField {
         let emission = element_emission(&self.mesh, &self.surfaces);
-        let weight: Vec<f64> = (self.sys.enclosed().iter())
-            .map(|&d| f64::from(u8::from(!d)))
+        let weight: Vec<f64> = (self.sys.exposure().iter())
+            .map(|&l| crate::exposure::fraction(l))
             .collect();
         SmoothField::from_parts(
             &self.mesh,
@@ -539,6 +541,13 @@ impl ClusterBake {
     /// Per element: inside closed geometry (it receives nothing and is seen by nothing).
     pub fn enclosed(&self) -> &[bool] {
         &self.sys.dead
+    }
+
+    /// Per element: how many of its probe points are exposed, of [`crate::exposure::POINTS`].
+    /// Its radiosity is that of its exposed part; [`crate::exposure::fraction`] of its area
+    /// counts in a surface's mean ([`metrics::surface_means_exposed`]).
+    pub fn exposure(&self) -> &[u8] {
+        self.sys.exposure()
     }
 
     /// Changes the surfaces' reflectance and emission and continues from the current
@@ -671,19 +680,15 @@ impl ClusterBake {
         let moved = Moved::new(&matched.changed_triangles(&self.mesh, &mesh));
         // An element that stayed keeps its answer unless one of its probes may meet what
         // moved.
-        let old_dead = &self.sys.dead;
-        let dead = crate::hierarchy::enclosed_elements_keeping(
-            &mesh,
-            &bvh,
-            self.params.ff.seed,
-            &|leaf, probes| {
+        let old_live = self.sys.exposure();
+        let live =
+            crate::exposure::exposure_keeping(&mesh, &bvh, self.params.ff.seed, &|leaf, probes| {
                 let o = *matched.old_of_new_leaf.get(leaf)?;
                 let clear = probes
                     .iter()
                     .all(|&(p, d)| !moved.ray_meets(p.as_dvec3(), d.as_dvec3()));
-                clear.then(|| old_dead.get(o as usize).copied()).flatten()
-            },
-        );
+                clear.then(|| old_live.get(o as usize).copied()).flatten()
+            });
         let oracle = Oracle::new(&mesh, &tree, &rho, &source);
         phases.direct_light = lap();
         let before = self.record.as_ref().map(|record| {
@@ -751,7 +756,7 @@ impl ClusterBake {
         })?;
         drop(walk);
         phases.assembly = lap();
-        let terms = (rho, source, dead);
+        let terms = (rho, source, live);
         let sys = HierSystem::new_in(&mesh, &tree, &record.links, terms, Some(&mut self.sys))?;
         phases.rows = lap();
         // The current light, carried to the elements that stayed; the others start from their
@@ -866,23 +871,31 @@ impl ClusterBake {
         tolerance: f64,
     ) -> Result<crate::spectral::SpectralResult, BakeError> {
         let max = self.cp.max_sweeps;
-        crate::spectral::solve_in_bands(
+        let mut result = crate::spectral::solve_in_bands(
             &self.mesh,
             &self.surfaces,
             materials,
             bands,
             |rho, source| Ok(self.sys.solve_with(&rho, &source, tolerance, max)?),
-        )
+        )?;
+        // The radiosity is that of each element's exposed part.
+        result.surfaces = surface_means_exposed(
+            &self.surfaces,
+            &self.mesh,
+            &result.radiosity,
+            self.sys.exposure(),
+        );
+        Ok(result)
     }
 
-    /// Writes the links and the current solution to `path` (version 3), atomically.
+    /// Writes the links and the current solution to `path` (version 4), atomically.
     pub fn write_checkpoint(&self, path: &Path) -> Result<(), BakeError> {
         crate::checkpoint::write_clustered(
             path,
             self.fingerprint,
             self.refinement_used,
             self.sys.rows(),
-            (self.sys.enclosed(), &self.radiosity()),
+            (self.sys.exposure(), &self.radiosity()),
             (self.record.as_ref()).map(|r| (self.oracle.hash(), &r.ops[..], &r.sized[..])),
         )
     }
@@ -930,13 +943,15 @@ impl ClusterBake {
         let report = self.report();
         let b = self.radiosity();
         let n = b.len();
-        let surfaces = surface_means(&self.surfaces, &self.mesh, &b);
-        let (rho, source, dead) = self.sys.into_parts();
+        let surfaces = surface_means_exposed(&self.surfaces, &self.mesh, &b, self.sys.exposure());
+        let (rho, source, live) = self.sys.into_parts();
         let links = crate::links::Links {
             row: vec![0; n + 1],
             ..Default::default()
         };
-        let system = System::new(&self.mesh, rho, source, links, &dead);
+        let share: Vec<f64> = live.iter().map(|&l| crate::exposure::fraction(l)).collect();
+        let system = System::exposed(&self.mesh, rho, source, links, &share);
+        let dead = live.iter().map(|&l| l == 0).collect();
         BakeResult::from_parts(self.mesh, system, b, surfaces, report, dead)
     }
 }

@@ -23,7 +23,7 @@
 //! `try_reserve`, so an allocator's refusal is that error too, never an abort.
 //!
 //! [`ClusterBake`] is the same engine shape as the per-triangle [`crate::Bake`]: built (or
-//! resumed from a version-3 checkpoint), then stepped one sweep at a time ([`solve::Info`], the
+//! resumed from a version-4 (or 3) checkpoint), then stepped one sweep at a time ([`solve::Info`], the
 //! stopping rule of [`crate::solve::Stall`]); material and light edits keep its links, and a
 //! geometry edit refines only what it touches ([`ClusterBake::edit_geometry`], bit for bit a
 //! fresh bake's links). What it does not do (the per-triangle bake does): the hemicube and

@@ -1,0 +1,192 @@
+//! How much of each element lies outside closed geometry: the clustered bake's exposure.
+//!
+//! A floor element partly under a box has a buried part that sees nothing and that nothing
+//! sees. Its form factors, averaged over the whole element, already leave that part out, as
+//! receiver and as source; if its radiosity were also the mean over the whole element, the
+//! buried part would darken it twice (once as the receiver's mean, once more when that mean is
+//! carried through the source's form factors). So the bake solves for the radiosity of the
+//! **exposed** part, with each element's exposed share of its area as its weight: the live area
+//! that takes a receiver's gather and votes in a source's pull (`cluster::solve`), and that a
+//! surface's mean counts (`metrics::surface_means_exposed`). Before this, an element was either
+//! enclosed (by its centroid) or not, and the 101 582-triangle room of boxes baked 11.7 % too
+//! dark against the path tracer.
+//!
+//! Each element is probed at [`POINTS`] points, the centroids of the nine triangles of its
+//! triangle split in three along each edge. A point is buried when every one of its
+//! [`PER_POINT`] cosine-distributed probe rays meets a back face; one that escapes or meets a
+//! front face settles it, so an open element costs one ray per point.
+
+use glam::{DVec3, Vec3};
+use radiant_visibility::Visibility;
+
+use crate::mesh::Mesh;
+
+/// Probe points per element.
+pub const POINTS: usize = 9;
+/// Probe rays per point.
+pub const PER_POINT: usize = 4;
+
+/// An element's probe rays, origins and directions as cast: point by point, [`PER_POINT`]
+/// each.
+pub(crate) type Probes = [(Vec3, Vec3); POINTS * PER_POINT];
+
+/// The share of an element's area that is exposed, from its count of exposed points.
+#[inline]
+pub fn fraction(live: u8) -> f64 {
+    f64::from(live.min(POINTS as u8)) / POINTS as f64
+}
+
+/// Per element: how many of its [`POINTS`] probe points lie outside closed geometry (0: the
+/// element is enclosed).
+pub fn exposure(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<u8> {
+    exposure_keeping(mesh, vis, seed, &|_, _| None)
+}
+
+/// [`exposure`], where `kept(element, probes)` may answer for an element without its probe
+/// rays being cast: an edit's element that stayed, whose probes nothing that moved can reach.
+pub(crate) fn exposure_keeping(
+    mesh: &Mesh,
+    vis: &dyn Visibility,
+    seed: u64,
+    kept: &(dyn Fn(usize, &Probes) -> Option<u8> + Sync),
+) -> Vec<u8> {
+    use rayon::prelude::*;
+    (0..mesh.element_count())
+        .into_par_iter()
+        .map(|leaf| {
+            let node = mesh.leaf_node(leaf as u32);
+            let id = mesh.stable_id(mesh.leaves[leaf]);
+            let mut rng = crate::rng::Rng::new(crate::rng::hash(seed ^ 0xE7905, id, 0));
+            let points = points(&node.v);
+            let probes: Probes = std::array::from_fn(|k| {
+                let origin = crate::form_factors::ray_origin(points[k / PER_POINT], node.normal);
+                let dir = cosine_probe(node.normal, k % PER_POINT, 2, &mut rng);
+                (origin, dir)
+            });
+            if let Some(live) = kept(leaf, &probes) {
+                return live;
+            }
+            probes
+                .chunks_exact(PER_POINT)
+                .filter(|rays| {
+                    !rays.iter().all(|&(o, d)| {
+                        vis.closest_hit(o, d, f32::INFINITY)
+                            .is_some_and(|h| !h.front)
+                    })
+                })
+                .count() as u8
+        })
+        .collect()
+}
+
+/// The centroids of the nine triangles that splitting `v`'s edges in three makes: six upright,
+/// three upside down. A regular set, so a share of the area is counted without noise along
+/// either edge.
+fn points(v: &[DVec3; 3]) -> [DVec3; POINTS] {
+    const T: f64 = 1.0 / 3.0;
+    const BARY: [(f64, f64); POINTS] = [
+        (T / 3.0, T / 3.0),
+        ((1.0 + T) / 3.0, T / 3.0),
+        ((2.0 + T) / 3.0, T / 3.0),
+        (T / 3.0, (1.0 + T) / 3.0),
+        ((1.0 + T) / 3.0, (1.0 + T) / 3.0),
+        (T / 3.0, (2.0 + T) / 3.0),
+        (2.0 * T / 3.0, 2.0 * T / 3.0),
+        ((1.0 + 2.0 * T) / 3.0, 2.0 * T / 3.0),
+        (2.0 * T / 3.0, (1.0 + 2.0 * T) / 3.0),
+    ];
+    BARY.map(|(a, b)| v[0] + (v[1] - v[0]) * a + (v[2] - v[0]) * b)
+}
+
+/// Probe `k` of `side²` about `normal`: cosine-distributed, stratified on a `side × side` grid
+/// and jittered by `rng`.
+pub(crate) fn cosine_probe(
+    normal: DVec3,
+    k: usize,
+    side: usize,
+    rng: &mut crate::rng::Rng,
+) -> Vec3 {
+    let (t, b) = crate::form_factors::basis(normal);
+    let s = side as f64;
+    let (u1, u2) = (
+        ((k % side) as f64 + rng.f64()) / s,
+        ((k / side) as f64 + rng.f64()) / s,
+    );
+    let (r, phi) = (u1.sqrt(), std::f64::consts::TAU * u2);
+    let dir = t * (r * phi.cos()) + b * (r * phi.sin()) + normal * (1.0 - u1).max(0.0).sqrt();
+    dir.as_vec3()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_points_are_the_centroids_of_the_nine_sub_triangles() {
+        let v = [DVec3::ZERO, DVec3::X * 3.0, DVec3::Y * 3.0];
+        let p = points(&v);
+        // Their mean is the triangle's centroid, and each lies inside.
+        let mean = p.iter().copied().sum::<DVec3>() / POINTS as f64;
+        assert!(
+            (mean - DVec3::new(1.0, 1.0, 0.0)).length() < 1e-12,
+            "{mean}"
+        );
+        for q in p {
+            assert!(q.x > 0.0 && q.y > 0.0 && q.x + q.y < 3.0, "{q}");
+        }
+        // No two coincide: a split box edge counts each ninth once.
+        for i in 0..POINTS {
+            for j in 0..i {
+                assert!((p[i] - p[j]).length() > 0.4, "{} and {}", p[i], p[j]);
+            }
+        }
+        assert_eq!(fraction(0), 0.0);
+        assert_eq!(fraction(POINTS as u8), 1.0);
+    }
+
+    #[test]
+    fn a_box_on_a_floor_covers_the_share_of_its_elements_it_stands_on() {
+        // A 4 × 4 m floor in 1 m elements under a closed box over x < 1.5: the elements at
+        // x < 1 are enclosed, those at x > 2 open, those across x = 1.5 half covered.
+        let mut scene = radiant_scene::Scene::default();
+        let floor = crate::scenes::quad(DVec3::ZERO, DVec3::Z * 4.0, DVec3::X * 4.0);
+        crate::scenes::add_surface(&mut scene, "floor", [0.5; 3], [0.0; 3], &floor);
+        let block = crate::scenes::box_triangles(DVec3::ZERO, DVec3::new(1.5, 1.0, 4.0), false);
+        crate::scenes::add_surface(&mut scene, "box", [0.5; 3], [0.0; 3], &block);
+        let params = crate::mesh::MeshParams {
+            patch_size: 10.0,
+            element_levels: 2,
+            ..Default::default()
+        };
+        let mesh = Mesh::new(&scene, &params).expect("mesh");
+        let bvh = crate::input::visibility(&mesh, None);
+        let live = exposure(&mesh, &bvh, 7);
+        let (mut area, mut open, mut partial) = (0.0, 0.0, 0);
+        for (i, &l) in live.iter().enumerate() {
+            let node = mesh.leaf_node(i as u32);
+            if mesh.root_surface[node.root as usize] != 0 {
+                continue;
+            }
+            // In the mesh's frame: back to metres along x.
+            let xs = node.v.map(|p| mesh.frame.to_world(p).x);
+            let (lo, hi) = (
+                xs.iter().copied().fold(f64::MAX, f64::min),
+                xs.iter().copied().fold(f64::MIN, f64::max),
+            );
+            if hi <= 1.0 + 1e-9 {
+                assert_eq!(l, 0, "an element under the box at x {lo}..{hi}");
+            } else if lo >= 1.5 - 1e-9 {
+                assert_eq!(usize::from(l), POINTS, "an open element at x {lo}..{hi}");
+            } else {
+                assert!(l > 0 && usize::from(l) < POINTS, "{l} at x {lo}..{hi}");
+                partial += 1;
+            }
+            area += node.area;
+            open += node.area * fraction(l);
+        }
+        assert!(partial > 0, "elements across the box's edge");
+        // The open share of the floor: 2.5 of 4 m.
+        let share = open / area;
+        assert!((share - 0.625).abs() < 0.02, "{share}");
+    }
+}
