@@ -39,28 +39,34 @@ pub fn fraction(live: u8) -> f64 {
 /// Per element: how many of its [`POINTS`] probe points lie outside closed geometry (0: the
 /// element is enclosed).
 pub fn exposure(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<u8> {
-    exposure_keeping(mesh, vis, seed, &|_, _| None)
+    exposure_keeping(mesh, vis, seed, &|_| None, &|_, _| None)
 }
 
-/// [`exposure`], where `kept(element, probes)` may answer for an element without its probe
-/// rays being cast: an edit's element that stayed, whose probes nothing that moved can reach.
+/// [`exposure`], where an edit's element that stayed may keep its old answer without its
+/// probe rays being cast: `settled(element)` answers before its probes are made (everything
+/// that moved lies behind it), `kept(element, probes)` when nothing that moved can reach them.
 pub(crate) fn exposure_keeping(
     mesh: &Mesh,
     vis: &dyn Visibility,
     seed: u64,
+    settled: &(dyn Fn(usize) -> Option<u8> + Sync),
     kept: &(dyn Fn(usize, &Probes) -> Option<u8> + Sync),
 ) -> Vec<u8> {
     use rayon::prelude::*;
     (0..mesh.element_count())
         .into_par_iter()
         .map(|leaf| {
+            if let Some(live) = settled(leaf) {
+                return live;
+            }
             let node = mesh.leaf_node(leaf as u32);
             let id = mesh.stable_id(mesh.leaves[leaf]);
             let mut rng = crate::rng::Rng::new(crate::rng::hash(seed ^ 0xE7905, id, 0));
             let points = points(&node.v);
+            let (t, b) = crate::form_factors::basis(node.normal);
             let probes: Probes = std::array::from_fn(|k| {
                 let origin = crate::form_factors::ray_origin(points[k / PER_POINT], node.normal);
-                let dir = cosine_probe(node.normal, k % PER_POINT, 2, &mut rng);
+                let dir = cosine_probe((t, b, node.normal), k % PER_POINT, 2, &mut rng);
                 (origin, dir)
             });
             if let Some(live) = kept(leaf, &probes) {
@@ -98,15 +104,14 @@ fn points(v: &[DVec3; 3]) -> [DVec3; POINTS] {
     BARY.map(|(a, b)| v[0] + (v[1] - v[0]) * a + (v[2] - v[0]) * b)
 }
 
-/// Probe `k` of `side²` about `normal`: cosine-distributed, stratified on a `side × side` grid
-/// and jittered by `rng`.
+/// Probe `k` of `side²` about `normal` (with its tangents `t`, `b`): cosine-distributed,
+/// stratified on a `side × side` grid and jittered by `rng`.
 pub(crate) fn cosine_probe(
-    normal: DVec3,
+    (t, b, normal): (DVec3, DVec3, DVec3),
     k: usize,
     side: usize,
     rng: &mut crate::rng::Rng,
 ) -> Vec3 {
-    let (t, b) = crate::form_factors::basis(normal);
     let s = side as f64;
     let (u1, u2) = (
         ((k % side) as f64 + rng.f64()) / s,

@@ -180,9 +180,10 @@ pub fn enclosed_elements(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<bo
             let id = mesh.stable_id(mesh.leaves[leaf]);
             let mut rng = crate::rng::Rng::new(crate::rng::hash(seed ^ 0xDEAD, id, 0));
             let origin = crate::form_factors::ray_origin(node.centroid, node.normal);
+            let (t, b) = crate::form_factors::basis(node.normal);
             // One probe that escapes or meets a front face decides it: not enclosed.
             (0..PROBES).all(|k| {
-                let dir = crate::exposure::cosine_probe(node.normal, k, 4, &mut rng);
+                let dir = crate::exposure::cosine_probe((t, b, node.normal), k, 4, &mut rng);
                 vis.closest_hit(origin, dir, f32::INFINITY)
                     .is_some_and(|h| !h.front)
             })

@@ -678,17 +678,31 @@ impl ClusterBake {
             return Err(BakeError::NeedsRebuild);
         }
         let moved = Moved::new(&matched.changed_triangles(&self.mesh, &mesh));
-        // An element that stayed keeps its answer unless one of its probes may meet what
-        // moved.
+        // An element that stayed keeps its answer when what moved lies behind it, or else
+        // unless one of its probes may meet what moved.
         let old_live = self.sys.exposure();
-        let live =
-            crate::exposure::exposure_keeping(&mesh, &bvh, self.params.ff.seed, &|leaf, probes| {
-                let o = *matched.old_of_new_leaf.get(leaf)?;
+        let old_of = |leaf: usize| -> Option<u8> {
+            let o = *matched.old_of_new_leaf.get(leaf)?;
+            old_live.get(o as usize).copied()
+        };
+        let live = crate::exposure::exposure_keeping(
+            &mesh,
+            &bvh,
+            self.params.ff.seed,
+            &|leaf| {
+                let node = mesh.leaf_node(leaf as u32);
+                moved
+                    .behind(node.v[0], node.normal)
+                    .then(|| old_of(leaf))
+                    .flatten()
+            },
+            &|leaf, probes| {
                 let clear = probes
                     .iter()
                     .all(|&(p, d)| !moved.ray_meets(p.as_dvec3(), d.as_dvec3()));
-                clear.then(|| old_live.get(o as usize).copied()).flatten()
-            });
+                clear.then(|| old_of(leaf)).flatten()
+            },
+        );
         let oracle = Oracle::new(&mesh, &tree, &rho, &source);
         phases.direct_light = lap();
         let before = self.record.as_ref().map(|record| {

@@ -80,6 +80,14 @@ impl Moved {
         clear(&self.all) || self.spheres.iter().all(clear)
     }
 
+    /// Whether everything that moved lies behind the plane through `p` with unit normal `n`
+    /// (beyond [`MARGIN`]): then no ray leaving a point of that plane on its front side can
+    /// meet it.
+    pub fn behind(&self, p: DVec3, n: DVec3) -> bool {
+        let behind = |&(c, radius): &(DVec3, f64)| n.dot(c - p) < -(radius + MARGIN);
+        behind(&self.all) || self.spheres.iter().all(behind)
+    }
+
     /// Whether the ray from `o` along `d` (to any distance) may meet what moved.
     pub fn ray_meets(&self, o: DVec3, d: DVec3) -> bool {
         let near =
@@ -483,4 +491,31 @@ fn spheres(triangles: &[[DVec3; 3]]) -> Vec<(DVec3, f64)> {
             ((lo + hi) * 0.5, (hi - lo).length() * 0.5)
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn what_lies_behind_a_plane_no_ray_from_its_front_meets() {
+        // A unit triangle moved to 1 below the floor y = 0 (its sphere's radius is 0.71), and
+        // one lying on the floor.
+        let below = Moved::new(&[[
+            DVec3::new(0.0, -1.0, 0.0),
+            DVec3::new(1.0, -1.0, 0.0),
+            DVec3::new(0.0, -1.0, 1.0),
+        ]]);
+        let on = Moved::new(&[[DVec3::ZERO, DVec3::X, DVec3::Z]]);
+        let (p, up) = (DVec3::new(5.0, 0.0, 5.0), DVec3::Y);
+        assert!(below.behind(p, up));
+        assert!(!below.behind(p, -up), "in front of a floor facing down");
+        assert!(!on.behind(p, up), "touching the plane is not behind it");
+        // What behind() settles, ray_meets agrees with: no upward ray from the floor meets it.
+        for k in 0..64 {
+            let a = f64::from(k) * 0.1;
+            let d = DVec3::new(a.cos(), 0.05 + f64::from(k % 7) * 0.1, a.sin());
+            assert!(!below.ray_meets(p + up * 1e-5, d), "{d}");
+        }
+    }
 }
