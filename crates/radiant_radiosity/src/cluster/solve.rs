@@ -653,27 +653,22 @@ mod tests {
         let on = |i: usize, s: u32| mesh.root_surface[mesh.leaf_node(i as u32).root as usize] == s;
         let n = mesh.element_count();
         let (of_a, of_b): (Vec<usize>, Vec<usize>) = (0..n).partition(|&i| on(i, 0));
-        let mut links = Vec::new();
-        for &r in &of_a {
-            for &s in &of_b {
-                let ff = 4.0 / of_b.len() as f32;
-                links.push(Link {
-                    recv: mesh.leaves[r],
-                    src: mesh.leaves[s],
+        // Every element of `to` from every element of `from`, the form factors summing to
+        // `sum` per receiver.
+        let all_from = |to: &[usize], from: &[usize], sum: f32| {
+            let ff = sum / from.len() as f32;
+            let leaf = |i: usize| mesh.leaves[i];
+            (to.iter())
+                .flat_map(move |&r| (from.iter()).map(move |&s| (r, s)))
+                .map(|(r, s)| Link {
+                    recv: leaf(r),
+                    src: leaf(s),
                     ff,
-                });
-            }
-        }
-        for &r in &of_b {
-            for &s in &of_a {
-                let ff = 0.5 / of_a.len() as f32;
-                links.push(Link {
-                    recv: mesh.leaves[r],
-                    src: mesh.leaves[s],
-                    ff,
-                });
-            }
-        }
+                })
+                .collect::<Vec<_>>()
+        };
+        let mut links = all_from(&of_a, &of_b, 4.0);
+        links.extend(all_from(&of_b, &of_a, 0.5));
         let live: Vec<u8> = (0..n).map(|i| if on(i, 0) { 1 } else { 9 }).collect();
         let rho = vec![[0.9; 3]; n];
         let source: Vec<Rgb> = (0..n)
