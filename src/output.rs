@@ -165,6 +165,7 @@ pub fn report_json(
             "memory_limit_bytes": c.memory_limit,
             "memory_counted_bytes": c.memory_estimate,
             "enclosed_elements": c.enclosed,
+            "partly_enclosed_elements": c.partly_enclosed,
         }),
         None => json!({ "kind": "triangles" }),
     };

@@ -223,4 +223,6 @@ fn a_floor_under_boxes_smaller_than_its_elements_bakes_as_the_path_tracer_sees_i
         .filter(|(w, a)| **w > 0.0 && **w < 0.99 * **a)
         .count();
     assert!(partial > 100, "{partial} elements covered in part");
+    let report = clu.report.clusters.as_ref().expect("a clustered report");
+    assert_eq!(report.partly_enclosed, partial, "the report counts them");
 }

@@ -493,6 +493,7 @@ impl ClusterBake {
             radiosity: &self.b,
             reflectance: &self.sys.rho,
             enclosed: self.sys.enclosed(),
+            exposure: self.sys.exposure(),
             info: self.sweeps.info,
             links: self.sys.links(),
             seconds: self.started.elapsed().as_secs_f64(),
@@ -947,6 +948,9 @@ impl ClusterBake {
                 memory_limit: self.budget.limit,
                 memory_estimate: self.budget.used,
                 enclosed: self.sys.enclosed().iter().filter(|&&d| d).count(),
+                partly_enclosed: (self.sys.exposure().iter())
+                    .filter(|&&l| l > 0 && usize::from(l) < crate::exposure::POINTS)
+                    .count(),
             }),
         }
     }

@@ -110,6 +110,9 @@ pub struct ClusterReport {
     pub memory_estimate: u64,
     /// Elements found inside closed geometry.
     pub enclosed: usize,
+    /// Elements enclosed in part: some of their probe points exposed, some not
+    /// ([`crate::exposure`]).
+    pub partly_enclosed: usize,
 }
 
 /// The memory budget: bytes handed out against a limit.
@@ -182,6 +185,9 @@ pub struct Sweep<'a> {
     pub reflectance: &'a [Rgb],
     /// Per element: inside closed geometry (seen by nothing).
     pub enclosed: &'a [bool],
+    /// Per element: its exposed probe points, of [`crate::exposure::POINTS`]: `radiosity` is
+    /// that of the exposed part ([`crate::metrics::surface_means_exposed`] weighs it).
+    pub exposure: &'a [u8],
     /// Sweeps so far, the estimated relative error of `radiosity` (the bake's residual) and
     /// the progress toward the tolerance.
     pub info: Info,
