@@ -59,13 +59,14 @@ impl SmoothField {
         radiosity: &[Rgb],
     ) -> SmoothField {
         let emission = element_emission(mesh, surfaces);
-        Self::from_parts(
-            mesh,
-            &system.rho,
-            &emission,
-            Some(&system.weight),
-            radiosity,
-        )
+        // `from_parts` weighs each element by its area already: the system's weights are
+        // areas (times an exposed share), so it takes their share of the area. Handing it the
+        // weights themselves weighed each vote by the area squared, unlike a clustered bake's
+        // own field.
+        let share: Vec<f64> = (system.weight.iter().zip(&system.area))
+            .map(|(&w, &a)| if a > 0.0 { w / a } else { 0.0 })
+            .collect();
+        Self::from_parts(mesh, &system.rho, &emission, Some(&share), radiosity)
     }
 
     /// The field from per-element reflectance, emission, weights (`None`: all vote) and

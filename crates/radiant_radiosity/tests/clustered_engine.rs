@@ -495,3 +495,34 @@ fn a_resumed_bake_edits_from_its_checkpoints_record_or_makes_its_refinement_agai
 fn gone_name(scene: &Scene, surface: u32) -> &str {
     &scene.surfaces[surface as usize].name
 }
+
+#[test]
+fn a_clustered_results_smooth_field_is_the_bakes_own() {
+    // The CLI fills light maps from the result's field (`SmoothField::new` over its system),
+    // the ECS from the bake's (`ClusterBake::smooth_field`): the same votes, exposure
+    // included (the blocks cover floor elements in part).
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    let mut b = fresh(&scene, &params());
+    b.run_to_end(&|_, _, _| {}, &mut Watch::default())
+        .expect("solves");
+    let own = b.smooth_field();
+    let all = radiant_radiosity::exposure::POINTS as u8;
+    assert!(b.exposure().iter().any(|&l| l > 0 && l < all));
+    let result = b.finish();
+    let field = radiant_radiosity::smooth::SmoothField::new(
+        &result.mesh,
+        &result.system,
+        &scene.surfaces,
+        &result.radiosity,
+    );
+    let mut worst = 0.0f64;
+    for leaf in 0..result.mesh.element_count() as u32 {
+        for w in [[1.0, 0.0, 0.0], [0.2, 0.3, 0.5]] {
+            let (x, y) = (own.radiosity_in(leaf, w), field.radiosity_in(leaf, w));
+            for c in 0..3 {
+                worst = worst.max((x[c] - y[c]).abs() / x[c].abs().max(1e-9));
+            }
+        }
+    }
+    assert!(worst < 1e-9, "the fields differ by {worst}");
+}
