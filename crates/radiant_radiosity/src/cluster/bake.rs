@@ -200,10 +200,11 @@ fn reserve_buffers(mesh: &Mesh, budget: &mut Budget) -> Result<(), BakeError> {
     let nodes = (mesh.nodes.len() + mesh.roots.len()) as u64;
     budget.reserve("the element buffers", n * (24 * 4 + 16))?;
     budget.reserve("the cluster tree", nodes * (24 * 5 + 8 * 4))?;
-    // Per cluster: its normals' harmonics, and two harmonics buffers of the solve.
+    // Per cluster: its normals' harmonics (the tree's, and the solve's copy and exposed
+    // parts'), and two harmonics buffers of the solve.
     budget.reserve(
         "the cluster buffers",
-        mesh.roots.len() as u64 * (72 + 2 * 216),
+        mesh.roots.len() as u64 * (3 * 72 + 2 * 216),
     )?;
     budget.reserve("the ray-tracing BVH", mesh.roots.len() as u64 * 160)?;
     // Kept for edits: direct light and the textures' footprints.

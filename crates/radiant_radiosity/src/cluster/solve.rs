@@ -66,8 +66,12 @@ pub struct HierSystem {
     center: Vec<DVec3>,
     /// Mesh: unit normal of every node.
     normal: Vec<DVec3>,
-    /// Per cluster: harmonics of its normals.
+    /// Per cluster: harmonics of its normals, by area (the tree's: what the refinement
+    /// divided a cluster receiver's form factors by).
     normal_sh: Vec<[f64; 9]>,
+    /// Per cluster: harmonics of its normals by exposed area ([`HierSystem::weight`]); the
+    /// tree's where nothing below it is enclosed. See [`HierSystem::live_harmonics`].
+    live_sh: Vec<[f64; 9]>,
 }
 
 /// Links in compressed rows by receiver node: row `n` is `src[row[n]..row[n + 1]]` with form
@@ -266,6 +270,7 @@ impl HierSystem {
             center: tree.center.clone(),
             normal: mesh.nodes.iter().map(|n| n.normal).collect(),
             normal_sh: tree.normal_sh.clone(),
+            live_sh: Vec::new(),
         };
         let mut w = vec![0.0; nodes];
         let mut full = vec![0.0; nodes];
@@ -292,7 +297,45 @@ impl HierSystem {
             .map(|(&live, &all)| if live > 0.0 { all / live } else { 1.0 })
             .collect();
         sys.weight = w;
+        sys.live_sh = sys.live_harmonics();
         sys
+    }
+
+    /// Per cluster, the harmonics of its normals weighted by exposed area. A cluster shines
+    /// and receives with its exposed parts: as a source, its radiosity towards a receiver is
+    /// the mean over its exposed parts weighted by how much they face it; as a receiver, its
+    /// exposed parts share what it gathered by how much they face the source. Both divide by
+    /// the exposed parts' mean cosine, not the whole cluster's: with the whole's, a cluster
+    /// holding enclosed faces that face the other end passed on less than it took, and one
+    /// whose enclosed faces face away more (a furnace with two touching boxes: B 12 % above
+    /// `E / (1 − ρ)` at ρ 0.9). Where nothing below a cluster is enclosed the tree's own
+    /// harmonics are kept, bit for bit.
+    fn live_harmonics(&self) -> Vec<[f64; 9]> {
+        let m = self.mesh_nodes as usize;
+        let mut out = self.normal_sh.clone();
+        for c in (0..out.len()).rev() {
+            let w = self.weight[m + c];
+            if self.dilution[m + c] == 1.0 || w <= 0.0 {
+                continue;
+            }
+            let mut acc = [0.0; 9];
+            for ch in self.cluster_children[c] {
+                let (ch, wc) = (ch as usize, self.weight[ch as usize]);
+                if wc <= 0.0 {
+                    continue;
+                }
+                let y = if ch >= m {
+                    out[ch - m]
+                } else {
+                    sh::basis(self.normal[ch])
+                };
+                for j in 0..9 {
+                    acc[j] += wc * y[j];
+                }
+            }
+            out[c] = acc.map(|v| v / w);
+        }
+        out
     }
 
     /// Per element, [`HierSystem::cap`]. A receiver enclosed in part gathers per unit of its
@@ -455,7 +498,7 @@ impl HierSystem {
         }
         let d = (self.center[r] - self.center[s]).normalize_or_zero();
         let cy = sh::cosine(d);
-        let den = sh::dot(&self.normal_sh[s - m], &cy).max(KAPPA_MIN);
+        let den = sh::dot(&self.live_sh[s - m], &cy).max(KAPPA_MIN);
         let ps = &p[s - m];
         std::array::from_fn(|k| (sh::dot(&ps[k], &cy) / den).max(0.0))
     }
@@ -502,11 +545,20 @@ impl HierSystem {
             .map(|n| {
                 let (lo, hi) = (self.row[n] as usize, self.row[n + 1] as usize);
                 let mut acc = [[0.0; 9]; 3];
+                // The refinement divided each form factor by the mean cosine of the whole
+                // area towards the source; its exposed parts share it (`live_harmonics`).
+                let diluted = self.dilution[n] != 1.0;
                 for k in lo..hi {
                     let s = self.src[k] as usize;
-                    let f = f64::from(self.ff[k]);
+                    let mut f = f64::from(self.ff[k]);
                     let v = self.value(n, s, &nb, &p);
-                    let y = sh::basis((self.center[s] - self.center[n]).normalize_or_zero());
+                    let d = (self.center[s] - self.center[n]).normalize_or_zero();
+                    if diluted {
+                        let cy = sh::cosine(d);
+                        let all = sh::dot(&self.normal_sh[n - m], &cy).max(KAPPA_MIN);
+                        f *= all / sh::dot(&self.live_sh[n - m], &cy).max(KAPPA_MIN);
+                    }
+                    let y = sh::basis(d);
                     for c in 0..3 {
                         let fv = f * v[c];
                         for j in 0..9 {
