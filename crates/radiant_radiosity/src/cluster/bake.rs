@@ -11,7 +11,7 @@ use radiant_visibility::Visibility;
 use super::edit::{self, Before, Moved, New, Old};
 use super::record::Record;
 use super::refine::{Link, RefineStats, Walk};
-use super::solve::{HierSystem, LINK_BYTES, Sweeping};
+use super::solve::{HierSystem, LINK_BYTES, SweepScratch, Sweeping};
 use super::tree::Tree;
 use super::{
     Budget, COARSEN_STEPS, ClusterParams, ClusterReport, Phase, Sweep, Watch, check, refine,
@@ -70,6 +70,8 @@ struct Sweeps {
     stalled: Option<SolveError>,
     timeline: Vec<TimelinePoint>,
     solving: Duration,
+    /// The sweeps' buffers, kept from one to the next until the solve converges.
+    scratch: SweepScratch,
 }
 
 impl Sweeps {
@@ -83,6 +85,7 @@ impl Sweeps {
             stalled: None,
             timeline: Vec::new(),
             solving: Duration::ZERO,
+            scratch: SweepScratch::default(),
         }
     }
 }
@@ -395,14 +398,20 @@ impl ClusterBake {
             return Ok(Info::nothing_to_solve());
         }
         let t = Instant::now();
-        let nb = self.sys.sweep(&self.b);
         let s = &mut self.sweeps;
+        let nb = self
+            .sys
+            .sweep_in(&self.b, &self.sys.rho, &self.sys.source, &mut s.scratch);
         let residual = s.rule.residual(&self.sys, &nb, &self.b, &self.sys.source);
         self.b = nb;
         s.since_start += 1;
         let iterations = s.info.iterations + 1;
         let tol = self.params.solver_params.tolerance;
         let converged = residual <= tol && s.since_start >= 2;
+        if converged {
+            // Nothing sweeps until the next change: the buffers go.
+            s.scratch = SweepScratch::default();
+        }
         // The residual is already an error estimate: contraction 0 keeps it as it is.
         s.info = Info::from_residual(iterations, residual, 0.0, 0.0, tol, converged);
         s.solving += t.elapsed();
