@@ -756,7 +756,7 @@ mod tests {
                     });
                 }
             }
-            // A cluster receiver and a cluster source too: the roots' parents.
+            // A cluster receiver too: the root cluster, from one element.
             let top = tree.root(&mesh);
             links.push(Link {
                 recv: top,
