@@ -5,7 +5,7 @@ use glam::DVec3;
 use radiant::radiosity::cluster::{self, ClusterParams};
 use radiant::radiosity::scenes::{add_surface, quad};
 use radiant::radiosity::{Bake, BakeParams, BakeResult};
-use radiant::reference::{Params, Tracer};
+use radiant::reference::{Params, SurfaceEstimate, Tracer};
 use radiant::scene::{Light, LightKind, Scene};
 
 /// A 10 × 4 × 10 room (inward faces, ρ 0.7) whose ceiling has a 4 × 4 skylight in its middle,
@@ -45,16 +45,8 @@ fn skylit_room() -> Scene {
     s
 }
 
-/// The path tracer's per-surface estimate (`samples` paths each, seed 1), and the
-/// per-triangle and clustered bakes at default settings.
-fn reference_and_bakes(
-    scene: &Scene,
-    samples: u64,
-) -> (
-    Vec<radiant::reference::SurfaceEstimate>,
-    BakeResult,
-    BakeResult,
-) {
+/// The path tracer's per-surface estimate, `samples` paths each, seed 1.
+fn traced(scene: &Scene, samples: u64) -> Vec<SurfaceEstimate> {
     let tracer = Tracer::new(scene).expect("tracer");
     let p = Params {
         samples: Some(samples),
@@ -62,7 +54,41 @@ fn reference_and_bakes(
         time_limit: None,
         seed: 1,
     };
-    let (reference, _) = tracer.surfaces(&p, &|_| {}).expect("trace");
+    tracer.surfaces(&p, &|_| {}).expect("trace").0
+}
+
+/// Per surface the tracer estimated that does not emit: its name, the reference's mean and
+/// relative standard error (first channel), and each bake's offset from it, relative.
+fn offsets(
+    scene: &Scene,
+    reference: &[SurfaceEstimate],
+    bakes: &[&BakeResult],
+) -> Vec<(String, f64, f64, Vec<f64>)> {
+    reference
+        .iter()
+        .map(|r| (&scene.surfaces[r.surface as usize], r))
+        .filter(|(s, _)| !s.is_emitter())
+        .map(|(s, r)| {
+            let m = r.estimate.mean[0];
+            let d = bakes.iter().map(|res| {
+                let b = (res.surfaces.iter())
+                    .find(|x| x.name == s.name)
+                    .expect("surface")
+                    .mean[0];
+                (b - m) / m
+            });
+            (s.name.clone(), m, r.estimate.se[0] / m, d.collect())
+        })
+        .collect()
+}
+
+/// The path tracer's per-surface estimate (`samples` paths each, seed 1), and the
+/// per-triangle and clustered bakes at default settings.
+fn reference_and_bakes(
+    scene: &Scene,
+    samples: u64,
+) -> (Vec<SurfaceEstimate>, BakeResult, BakeResult) {
+    let reference = traced(scene, samples);
     let params = BakeParams::default();
     let tri = Bake::new(scene, &params)
         .expect("bake")
@@ -124,24 +150,10 @@ fn a_room_of_boxes_bakes_as_the_path_tracer_sees_it() {
     // the light is indirect and much of the floor near a box.
     let scene = radiant::radiosity::scenes::room_with_boxes(5, 1);
     let (reference, tri, clu) = reference_and_bakes(&scene, 65_536);
-    for r in &reference {
-        let s = &scene.surfaces[r.surface as usize];
-        if s.is_emitter() {
-            continue;
-        }
-        let get = |res: &BakeResult| {
-            res.surfaces
-                .iter()
-                .find(|x| x.name == s.name)
-                .expect("surface")
-                .mean[0]
-        };
-        let m = r.estimate.mean[0];
-        let se = r.estimate.se[0] / m;
-        let (dt, dc) = ((get(&tri) - m) / m, (get(&clu) - m) / m);
+    for (name, m, se, d) in offsets(&scene, &reference, &[&tri, &clu]) {
+        let (dt, dc) = (d[0], d[1]);
         println!(
-            "{}: ref {m:.5} (se {:.2} %), triangles {:+.2} %, clustered {:+.2} %",
-            s.name,
+            "{name}: ref {m:.5} (se {:.2} %), triangles {:+.2} %, clustered {:+.2} %",
             100.0 * se,
             100.0 * dt,
             100.0 * dc
@@ -152,14 +164,9 @@ fn a_room_of_boxes_bakes_as_the_path_tracer_sees_it() {
         // planar visibility was weighted by the kernel).
         assert!(
             dt.abs() <= 0.02 + 3.0 * se,
-            "{}: per-triangle off by {dt}",
-            s.name
+            "{name}: per-triangle off by {dt}"
         );
-        assert!(
-            dc.abs() <= 0.04 + 3.0 * se,
-            "{}: clustered off by {dc}",
-            s.name
-        );
+        assert!(dc.abs() <= 0.04 + 3.0 * se, "{name}: clustered off by {dc}");
     }
 }
 
@@ -180,14 +187,7 @@ fn a_floor_under_boxes_smaller_than_its_elements_bakes_as_the_path_tracer_sees_i
             t.surface = boxes;
         }
     }
-    let tracer = Tracer::new(&scene).expect("tracer");
-    let p = Params {
-        samples: Some(262_144),
-        target_error: None,
-        time_limit: None,
-        seed: 1,
-    };
-    let (reference, _) = tracer.surfaces(&p, &|_| {}).expect("trace");
+    let reference = traced(&scene, 262_144);
     let clu = cluster::bake(
         &scene,
         &BakeParams::default(),
@@ -195,29 +195,14 @@ fn a_floor_under_boxes_smaller_than_its_elements_bakes_as_the_path_tracer_sees_i
         &|_, _, _| {},
     )
     .expect("clustered");
-    for r in &reference {
-        let s = &scene.surfaces[r.surface as usize];
-        if s.is_emitter() {
-            continue;
-        }
-        let b = (clu.surfaces.iter())
-            .find(|x| x.name == s.name)
-            .expect("surface")
-            .mean[0];
-        let m = r.estimate.mean[0];
-        let se = r.estimate.se[0] / m;
-        let d = (b - m) / m;
+    for (name, m, se, d) in offsets(&scene, &reference, &[&clu]) {
+        let d = d[0];
         println!(
-            "{}: ref {m:.5} (se {:.2} %), clustered {:+.2} %",
-            s.name,
+            "{name}: ref {m:.5} (se {:.2} %), clustered {:+.2} %",
             100.0 * se,
             100.0 * d
         );
-        assert!(
-            d.abs() <= 0.03 + 3.0 * se,
-            "{}: clustered off by {d}",
-            s.name
-        );
+        assert!(d.abs() <= 0.03 + 3.0 * se, "{name}: clustered off by {d}");
     }
     let partial = (clu.system.weight.iter().zip(&clu.system.area))
         .filter(|(w, a)| **w > 0.0 && **w < 0.99 * **a)
