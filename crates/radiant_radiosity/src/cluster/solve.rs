@@ -726,23 +726,29 @@ mod tests {
     use crate::mesh::MeshParams;
     use crate::scenes::{add_surface, quad};
 
+    /// Two unit quads facing each other `gap` apart (`a` below, `b` above), with reflectance
+    /// `rho` and `a`'s emission `e`, meshed `levels` below one patch each.
+    fn facing_quads(gap: f64, rho: [f64; 2], e: f64, levels: u8) -> Mesh {
+        let mut scene = radiant_scene::Scene::default();
+        let a = quad(DVec3::ZERO, DVec3::Z, DVec3::X);
+        let b = quad(DVec3::Y * gap, DVec3::X, DVec3::Z);
+        add_surface(&mut scene, "a", [rho[0]; 3], [e; 3], &a);
+        add_surface(&mut scene, "b", [rho[1]; 3], [0.0; 3], &b);
+        let params = MeshParams {
+            patch_size: 10.0,
+            element_levels: levels,
+            ..Default::default()
+        };
+        Mesh::new(&scene, &params).expect("mesh")
+    }
+
     #[test]
     fn a_sweep_in_kept_buffers_is_a_fresh_sweep_bit_for_bit() {
         // Two facing quads linked every element to every element, at two mesh resolutions:
         // the buffers kept from sweeps of the finer system hold stale, larger contents when
         // the coarser one sweeps in them.
-        let mut scene = radiant_scene::Scene::default();
-        let a = quad(DVec3::ZERO, DVec3::Z, DVec3::X);
-        let b = quad(DVec3::Y * 0.5, DVec3::X, DVec3::Z);
-        add_surface(&mut scene, "a", [0.7; 3], [1.0; 3], &a);
-        add_surface(&mut scene, "b", [0.5; 3], [0.0; 3], &b);
         let system = |levels: u8| {
-            let params = MeshParams {
-                patch_size: 10.0,
-                element_levels: levels,
-                ..Default::default()
-            };
-            let mesh = Mesh::new(&scene, &params).expect("mesh");
+            let mesh = facing_quads(0.5, [0.7, 0.5], 1.0, levels);
             let tree = Tree::new(&mesh);
             let n = mesh.element_count();
             let root = |i: usize| mesh.leaf_node(i as u32).root;
@@ -790,17 +796,7 @@ mod tests {
         // Two facing quads; `a` is enclosed but for a ninth, and its links claim four
         // hemispheres (the scatter of a few samples): per unit of exposed area, 36. With
         // ρ 0.9 the loop a → b → a would gain 14.6 a sweep and diverge.
-        let mut scene = radiant_scene::Scene::default();
-        let a = quad(DVec3::ZERO, DVec3::Z, DVec3::X);
-        let b = quad(DVec3::Y * 0.1, DVec3::X, DVec3::Z);
-        add_surface(&mut scene, "a", [0.9; 3], [0.0; 3], &a);
-        add_surface(&mut scene, "b", [0.9; 3], [0.0; 3], &b);
-        let params = MeshParams {
-            patch_size: 10.0,
-            element_levels: 0,
-            ..Default::default()
-        };
-        let mesh = Mesh::new(&scene, &params).expect("mesh");
+        let mesh = facing_quads(0.1, [0.9, 0.9], 0.0, 0);
         let tree = Tree::new(&mesh);
         let on = |i: usize, s: u32| mesh.root_surface[mesh.leaf_node(i as u32).root as usize] == s;
         let n = mesh.element_count();
