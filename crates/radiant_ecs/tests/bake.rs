@@ -496,7 +496,7 @@ fn level_app() -> (App, radiant_scene::Scene) {
 /// Moves the short block of a world baked with the clustered hierarchy by `dx` and checks
 /// that the edit is applied in place: one build, one geometry edit, the links of a fresh
 /// clustered bake of the moved scene, fewer form factors computed (hidden links included)
-/// than that fresh bake computes, and its light within 0.1 %.
+/// than that fresh bake computes, a preview published first, and its light within 0.1 %.
 fn move_short_block_in_place(app: &mut App, dx: f64) {
     let mut q = app.world.query::<(&Name, &mut Transform)>();
     for (n, mut t) in q.iter_mut(&mut app.world) {
@@ -512,6 +512,10 @@ fn move_short_block_in_place(app: &mut App, dx: f64) {
         (1, 1),
         "{moved:?}"
     );
+    // Its light was first published as a preview, before the refinement; the converged
+    // light is the edit's own.
+    assert_eq!(moved.counts.previews, 1, "{moved:?}");
+    assert!(!app.world.resource::<BakedLighting>().preview);
     let want = clustered(&gather_scene(&mut app.world));
     assert_eq!(moved.size.links, want.report.links);
     let fresh_ff = want.report.clusters.as_ref().map_or(0, |c| c.form_factors);

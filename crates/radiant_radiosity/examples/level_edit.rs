@@ -71,17 +71,38 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("converged at {:.2} s", t.elapsed().as_secs_f64());
 
     let t = Instant::now();
-    let e = bake.edit_geometry(&moved, &|_, _, _| {}, None)?;
+    let mut preview = None;
+    let e = bake.edit_geometry_previewed(
+        &moved,
+        &|_, _, _| {},
+        None,
+        Some(&mut |p: radiant_radiosity::cluster::EditPreview| preview = Some(p)),
+    )?;
     let edited = t.elapsed().as_secs_f64();
+    match &preview {
+        Some(p) => {
+            let t = Instant::now();
+            let field = p.smooth_field(bake.surfaces());
+            println!(
+                "preview after {:.3} s: direct light traced again for {} elements; its smooth field in {:.3} s more",
+                p.seconds,
+                p.retraced,
+                t.elapsed().as_secs_f64(),
+            );
+            drop(field);
+        }
+        None => println!("no preview"),
+    }
     println!(
         "edit: {:.3} s, {} form factors computed, {} links kept, {} of {} nodes kept",
         e.seconds, e.computed, e.kept, e.kept_nodes, e.nodes
     );
     let p = e.phases;
     println!(
-        "  replay {:.3} s, meshing {:.3} s, BVH and tree {:.3} s, direct light {:.3} s, matching {:.3} s, refinement {:.3} s, assembly {:.3} s ({}), rows {:.3} s",
+        "  replay {:.3} s, meshing {:.3} s, preview {:.3} s, BVH and tree {:.3} s, direct light {:.3} s, matching {:.3} s, refinement {:.3} s, assembly {:.3} s ({}), rows {:.3} s",
         p.replay,
         p.meshing,
+        p.preview,
         p.visibility,
         p.direct_light,
         p.matching,
@@ -99,7 +120,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Ok(());
     }
     // Each sweep's light, then the converged one to measure them against.
-    let mut lights = vec![(0.0, bake.radiosity())];
+    let mut lights = preview
+        .map(|p| (p.seconds - edited, p.radiosity))
+        .into_iter()
+        .collect::<Vec<_>>();
+    lights.push((0.0, bake.radiosity()));
     let t = Instant::now();
     loop {
         let info = bake.step()?;
@@ -109,6 +134,41 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     let last = lights.last().map(|l| l.1.clone()).unwrap_or_default();
+    // Where the first light's error lies: on the moved surfaces, or on the others within a
+    // metre of where they moved, or further off (shares of the squared difference).
+    if let Some((_, first)) = lights.first() {
+        let mesh = bake.mesh();
+        let moved_at = |leaf: usize| {
+            let root = mesh.leaf_node(leaf as u32).root as usize;
+            let s = moved.triangles[root].surface as usize;
+            moved.surfaces[s].name.starts_with(&prefix)
+        };
+        let (mut lo, mut hi) = (glam::DVec3::INFINITY, glam::DVec3::NEG_INFINITY);
+        for leaf in (0..mesh.element_count()).filter(|&l| moved_at(l)) {
+            let c = mesh.frame.to_world(mesh.leaf_node(leaf as u32).centroid);
+            (lo, hi) = (lo.min(c), hi.max(c));
+        }
+        let mut share = [0.0f64; 3];
+        for (leaf, (x, y)) in first.iter().zip(&last).enumerate() {
+            let d: f64 = (0..3).map(|c| (x[c] - y[c]).powi(2)).sum();
+            let c = mesh.frame.to_world(mesh.leaf_node(leaf as u32).centroid);
+            let near = c.clamp(lo - offset.abs(), hi + offset.abs()).distance(c) < 1.0;
+            share[if moved_at(leaf) {
+                0
+            } else if near {
+                1
+            } else {
+                2
+            }] += d;
+        }
+        let all = share.iter().sum::<f64>().max(1e-300);
+        println!(
+            "the first light's squared error: {:.0} % on the moved surfaces, {:.0} % within a metre of them, {:.0} % further off",
+            100.0 * share[0] / all,
+            100.0 * share[1] / all,
+            100.0 * share[2] / all
+        );
+    }
     println!("seconds since the edit began, and the light's error against the converged one:");
     let mut within = None;
     for (s, b) in &lights {

@@ -476,38 +476,77 @@ pub fn sky_irradiance(
     rays: u32,
     seed: u64,
 ) -> Vec<Rgb> {
-    let side = (f64::from(rays.max(1)).sqrt().round() as u32).max(1);
-    let count = f64::from(side * side);
     let mut out = vec![[0.0; 3]; mesh.element_count()];
     out.par_iter_mut()
         .with_min_len(64)
         .enumerate()
-        .for_each(|(leaf, e)| {
-            let id = mesh.leaves[leaf];
-            let node = &mesh.nodes[id as usize];
-            let n = node.normal;
-            let (t, b) = n.any_orthonormal_pair();
-            let mut rng = crate::rng::Rng::new(crate::rng::hash(seed, mesh.stable_id(id), 0x5C7));
-            // The scene fits in the unit cube around the origin: 1.75 units (past its half
-            // diagonal) always leave it, and keep the segment's end cut short.
-            let origin = node.centroid + n * 1e-5;
-            let mut sum = DVec3::ZERO;
-            for i in 0..side {
-                for j in 0..side {
-                    let u1 = (f64::from(i) + rng.f64()) / f64::from(side);
-                    let u2 = (f64::from(j) + rng.f64()) / f64::from(side);
-                    let r = u1.sqrt();
-                    let phi = std::f64::consts::TAU * u2;
-                    let dir = t * (r * phi.cos()) + b * (r * phi.sin()) + n * (1.0 - u1).sqrt();
-                    if vis.segment_clear(origin.as_vec3(), (origin + dir * 1.75).as_vec3()) {
-                        sum += DVec3::from(sky.radiance(dir));
-                    }
+        .for_each(|(leaf, e)| *e = sky_at(mesh, sky, vis, (rays, seed), leaf));
+    out
+}
+
+/// [`sky_irradiance`] of one element.
+fn sky_at(
+    mesh: &Mesh,
+    sky: &Sky,
+    vis: &dyn Visibility,
+    (rays, seed): (u32, u64),
+    leaf: usize,
+) -> Rgb {
+    let side = (f64::from(rays.max(1)).sqrt().round() as u32).max(1);
+    let count = f64::from(side * side);
+    let id = mesh.leaves[leaf];
+    let node = &mesh.nodes[id as usize];
+    let n = node.normal;
+    let (t, b) = n.any_orthonormal_pair();
+    let mut rng = crate::rng::Rng::new(crate::rng::hash(seed, mesh.stable_id(id), 0x5C7));
+    // The scene fits in the unit cube around the origin: 1.75 units (past its half
+    // diagonal) always leave it, and keep the segment's end cut short.
+    let origin = node.centroid + n * 1e-5;
+    let mut sum = DVec3::ZERO;
+    for i in 0..side {
+        for j in 0..side {
+            let u1 = (f64::from(i) + rng.f64()) / f64::from(side);
+            let u2 = (f64::from(j) + rng.f64()) / f64::from(side);
+            let r = u1.sqrt();
+            let phi = std::f64::consts::TAU * u2;
+            let dir = t * (r * phi.cos()) + b * (r * phi.sin()) + n * (1.0 - u1).sqrt();
+            if vis.segment_clear(origin.as_vec3(), (origin + dir * 1.75).as_vec3()) {
+                sum += DVec3::from(sky.radiance(dir));
+            }
+        }
+    }
+    (sum * (std::f64::consts::PI / count)).to_array()
+}
+
+/// [`direct_irradiance`] of the elements `leaves` only, in their order: the same values, bit
+/// for bit, as the whole mesh's.
+pub fn direct_irradiance_of(
+    lights: &[Light],
+    sky: Option<&Sky>,
+    mesh: &Mesh,
+    vis: &dyn Visibility,
+    params: &FormFactorParams,
+    leaves: &[u32],
+) -> Vec<Rgb> {
+    let sky = sky.filter(|s| !s.is_dark());
+    (leaves.par_iter())
+        .with_min_len(64)
+        .map(|&leaf| {
+            let leaf = leaf as usize;
+            let mut e = if lights.is_empty() {
+                [0.0; 3]
+            } else {
+                crate::lights::irradiance_at(mesh, lights, vis, leaf)
+            };
+            if let Some(sky) = sky {
+                let s = sky_at(mesh, sky, vis, (params.sky_rays, params.seed), leaf);
+                for c in 0..3 {
+                    e[c] += s[c];
                 }
             }
-            let irr = sum * (std::f64::consts::PI / count);
-            *e = irr.to_array();
-        });
-    out
+            e
+        })
+        .collect()
 }
 
 /// The source term `S = E + ρ · E_direct / π` per element.

@@ -14,19 +14,24 @@ use crate::mesh::Mesh;
 /// Irradiance (linear RGB, lux) at each element's centroid from all lights, with shadows.
 pub fn direct_irradiance(mesh: &Mesh, lights: &[Light], vis: &dyn Visibility) -> Vec<[f64; 3]> {
     use rayon::prelude::*;
-    let frame = mesh.frame;
     let mut out = vec![[0.0; 3]; mesh.element_count()];
     // Per element, the lights in order: the same sums on any number of threads.
     out.par_iter_mut()
         .with_min_len(256)
         .enumerate()
-        .for_each(|(leaf, e)| {
-            for light in lights {
-                let local = frame.to_local(light.position);
-                light_one(mesh, frame, light, local, leaf, e, vis);
-            }
-        });
+        .for_each(|(leaf, e)| *e = irradiance_at(mesh, lights, vis, leaf));
     out
+}
+
+/// [`direct_irradiance`] of one element.
+pub fn irradiance_at(mesh: &Mesh, lights: &[Light], vis: &dyn Visibility, leaf: usize) -> [f64; 3] {
+    let frame = mesh.frame;
+    let mut e = [0.0; 3];
+    for light in lights {
+        let local = frame.to_local(light.position);
+        light_one(mesh, frame, light, local, leaf, &mut e, vis);
+    }
+    e
 }
 
 #[inline]

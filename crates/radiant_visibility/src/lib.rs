@@ -245,32 +245,43 @@ impl Bvh {
     }
 }
 
-impl Visibility for Bvh {
-    fn segment_clear(&self, a: Vec3, b: Vec3) -> bool {
+impl Bvh {
+    /// [`Visibility::segment_clear`], where the triangles `removed` marks (by the caller's
+    /// index) are not there.
+    fn segment_clear_without(&self, a: Vec3, b: Vec3, removed: Option<&[bool]>) -> bool {
         if self.tris.is_empty() {
             return true;
         }
+        let gone = |id: usize| removed.is_some_and(|r| r.get(self.ids[id] as usize) == Some(&true));
         let (o, d) = (Vec3A::from(a), positive_zeros(b - a));
         let ray = Ray::new(o, d, SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON);
         self.bvh.ray_traverse_miss(ray, |r, id| {
             match self.tris[id].intersect(r.origin, r.direction, r.tmin, r.tmax) {
-                Some((t, u, v, _)) if self.counts(id, u, v) => t,
+                Some((t, u, v, _)) if !gone(id) && self.counts(id, u, v) => t,
                 _ => f32::INFINITY,
             }
         })
     }
 
-    fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit> {
+    /// [`Visibility::closest_hit`], where the triangles `removed` marks are not there.
+    fn closest_hit_without(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        tmax: f32,
+        removed: Option<&[bool]>,
+    ) -> Option<Hit> {
         if self.tris.is_empty() {
             return None;
         }
+        let gone = |id: usize| removed.is_some_and(|r| r.get(self.ids[id] as usize) == Some(&true));
         let (o, d) = (Vec3A::from(origin), positive_zeros(dir));
         let ray = Ray::new(o, d, ray_tmin(dir), tmax);
         let mut hit = obvhs::ray::RayHit::none();
         let mut best: Option<(f32, f32, f32, bool, usize)> = None;
         self.bvh.ray_traverse(ray, &mut hit, |r, id| {
             match self.tris[id].intersect(r.origin, r.direction, r.tmin, r.tmax) {
-                Some((t, u, v, front)) if self.counts(id, u, v) => {
+                Some((t, u, v, front)) if !gone(id) && self.counts(id, u, v) => {
                     if best.is_none_or(|b| t < b.0) {
                         best = Some((t, u, v, front, id));
                     }
@@ -286,6 +297,55 @@ impl Visibility for Bvh {
             v,
             front,
         })
+    }
+}
+
+impl Visibility for Bvh {
+    fn segment_clear(&self, a: Vec3, b: Vec3) -> bool {
+        self.segment_clear_without(a, b, None)
+    }
+
+    fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit> {
+        self.closest_hit_without(origin, dir, tmax, None)
+    }
+}
+
+/// A BVH seen with some of its triangles taken away and others added, without building it
+/// again: what a quick look at an edit traces against while the edited scene's own BVH is
+/// still to be built. Hits on the added triangles carry the index `base count + i`.
+pub struct Patched<'a> {
+    base: &'a Bvh,
+    /// By the base's (the caller's) index: the triangles taken away.
+    removed: Vec<bool>,
+    added: Bvh,
+}
+
+impl<'a> Patched<'a> {
+    /// `base` without the triangles `removed` marks (by the index given to its constructor),
+    /// with `added`.
+    pub fn new(base: &'a Bvh, removed: Vec<bool>, added: Bvh) -> Self {
+        Patched {
+            base,
+            removed,
+            added,
+        }
+    }
+}
+
+impl Visibility for Patched<'_> {
+    fn segment_clear(&self, a: Vec3, b: Vec3) -> bool {
+        self.added.segment_clear(a, b) && self.base.segment_clear_without(a, b, Some(&self.removed))
+    }
+
+    fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit> {
+        let near = self.added.closest_hit(origin, dir, tmax).map(|mut h| {
+            h.triangle += self.base.ids.len() as u32;
+            h
+        });
+        let limit = near.map_or(tmax, |h| h.t);
+        (self.base)
+            .closest_hit_without(origin, dir, limit, Some(&self.removed))
+            .or(near)
     }
 }
 
@@ -390,6 +450,45 @@ mod tests {
                 "{n} triangles"
             );
         }
+    }
+
+    #[test]
+    fn a_patched_bvh_is_a_bvh_built_again() {
+        let mut rng = Rng(0x2545_F491_4F6C_DD1D);
+        let tris = soup(&mut rng, 400);
+        let added = soup(&mut rng, 40);
+        // Every third triangle taken away.
+        let removed: Vec<bool> = (0..tris.len()).map(|i| i % 3 == 0).collect();
+        let after: Vec<[Vec3; 3]> = (tris.iter().enumerate())
+            .filter(|(i, _)| !removed[*i])
+            .map(|(_, t)| *t)
+            .chain(added.iter().copied())
+            .collect();
+        let base = Bvh::new(&tris);
+        let patched = Patched::new(&base, removed, Bvh::new(&added));
+        let brute = BruteForce::new(&after);
+        let (mut blocked, mut changed) = (0, 0);
+        for _ in 0..4000 {
+            let (a, b) = (rng.v() * 1.5, rng.v() * 1.5);
+            let clear = patched.segment_clear(a, b);
+            assert_eq!(clear, brute.segment_clear(a, b), "segment {a} {b}");
+            blocked += usize::from(!clear);
+            changed += usize::from(clear != base.segment_clear(a, b));
+            let (h1, h2) = (
+                patched.closest_hit(a, b - a, f32::INFINITY),
+                brute.closest_hit(a, b - a, f32::INFINITY),
+            );
+            match (h1, h2) {
+                (Some(x), Some(y)) => assert!((x.t - y.t).abs() < 1e-5, "{x:?} {y:?}"),
+                (None, None) => {}
+                other => panic!("patched and brute force disagree: {other:?}"),
+            }
+        }
+        // Both what was taken away and what was added must have mattered.
+        assert!(
+            blocked > 500 && changed > 100,
+            "{blocked} blocked, {changed} changed"
+        );
     }
 
     #[test]

@@ -165,6 +165,8 @@ pub struct BakeCounts {
     pub geometry_edits: u64,
     /// Links recomputed by geometry edits (the rest were kept).
     pub links_recomputed: usize,
+    /// Previews published by geometry edits before their refinement ([`BakedLighting::preview`]).
+    pub previews: u64,
 }
 
 /// Something the bake went on past.
@@ -217,6 +219,11 @@ pub struct BakedLighting {
     pub surfaces: Vec<SurfaceMean>,
     /// The estimated error when it was published.
     pub estimated_error: f64,
+    /// A geometry edit's first look at its light, published before the edit refines its links
+    /// (`radiant_radiosity::cluster::EditPreview`: the light carried over, the direct light
+    /// traced again where the edit may have changed it); `estimated_error` is the one before
+    /// the edit. The edit's sweeps publish the light itself.
+    pub preview: bool,
 }
 
 /// Requests to the bake; take effect on the next frame.
@@ -556,8 +563,12 @@ fn publish(world: &mut World, p: Published, current: u64) {
     l.field = Some(p.field);
     l.surfaces = p.surfaces;
     l.estimated_error = error;
+    l.preview = p.preview;
     let mut s = world.resource_mut::<BakeStatus>();
     s.stale = p.epoch < current;
+    if p.preview && !s.stale {
+        s.counts.previews += 1;
+    }
     if p.converged && p.epoch == current {
         s.phase = BakePhase::Converged;
         s.progress.fraction = 1.0;

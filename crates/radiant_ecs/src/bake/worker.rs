@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, mpsc};
 use std::time::{Duration, Instant};
 
-use radiant_radiosity::cluster::{self, ClusterBake, ClusterParams, Phase};
+use radiant_radiosity::cluster::{self, ClusterBake, ClusterParams, EditPreview, Phase};
 use radiant_radiosity::metrics::{SurfaceMean, surface_means, surface_means_exposed};
 use radiant_radiosity::smooth::SmoothField;
 use radiant_radiosity::{Bake, BakeError, BakeParams, Info, Mesh, Rgb, SolveError};
@@ -60,6 +60,8 @@ pub(super) struct Published {
     /// The world's epoch the light matches.
     pub epoch: u64,
     pub converged: bool,
+    /// A geometry edit's preview ([`EditPreview`]).
+    pub preview: bool,
 }
 
 /// How a worker ended.
@@ -224,10 +226,11 @@ impl Engine {
         }
     }
 
-    fn mesh(&self) -> &Mesh {
+    /// The mesh to publish light on: the clustered bake's own, shared.
+    fn shared_mesh(&self) -> Arc<Mesh> {
         match self {
-            Engine::Triangles(b) => &b.mesh,
-            Engine::Clustered(b) => b.mesh(),
+            Engine::Triangles(b) => Arc::new(b.mesh.clone()),
+            Engine::Clustered(b) => b.shared_mesh(),
         }
     }
 
@@ -274,8 +277,13 @@ impl Engine {
         }
     }
 
-    /// Applies `edit`; returns the links a geometry edit recomputed, and the links now.
-    fn apply(&mut self, edit: &Edit) -> Result<Option<(usize, usize)>, BakeError> {
+    /// Applies `edit`; returns the links a geometry edit recomputed, and the links now. A
+    /// level's geometry edit hands `preview` a first look at its light.
+    fn apply(
+        &mut self,
+        edit: &Edit,
+        preview: &mut dyn FnMut(EditPreview),
+    ) -> Result<Option<(usize, usize)>, BakeError> {
         // A geometry edit brings the scene's materials and lights along (and matches
         // surfaces by name, so they must not be renamed under it first).
         if let Some(scene) = &edit.geometry {
@@ -285,7 +293,7 @@ impl Engine {
                     Ok(Some((stats.recomputed, b.system.links.len())))
                 }
                 Engine::Clustered(b) => {
-                    let e = b.edit_geometry(scene, &|_, _, _| {}, None)?;
+                    let e = b.edit_geometry_previewed(scene, &|_, _, _| {}, None, Some(preview))?;
                     Ok(Some((e.computed as usize, e.links)))
                 }
             };
@@ -424,7 +432,7 @@ fn begin(
         Start::Build(scene) => match Engine::build(&scene, setup, inbox, tx) {
             Ok(engine) => {
                 let held = Held {
-                    mesh: Arc::new(engine.mesh().clone()),
+                    mesh: engine.shared_mesh(),
                     epoch: setup.epoch,
                     at_edit: 0,
                     built: Instant::now(),
@@ -459,10 +467,23 @@ fn apply(
 ) -> Result<(), Outcome> {
     // An edit's warm start forgets the last step; the solver's count goes on.
     let before = held.engine.iterations();
-    match held.engine.apply(edit) {
+    // A level's geometry edit shows a first look at its light before it refines.
+    let mut preview = |p: EditPreview| {
+        let surfaces = edit.surfaces.as_slice();
+        let _ = tx.send(Report::Publish(Box::new(Published {
+            field: Arc::new(p.smooth_field(surfaces)),
+            surfaces: surface_means_exposed(surfaces, &p.mesh, &p.radiosity, &p.exposure),
+            mesh: p.mesh,
+            radiosity: p.radiosity,
+            epoch,
+            converged: false,
+            preview: true,
+        })));
+    };
+    match held.engine.apply(edit, &mut preview) {
         Ok(geometry) => {
             if geometry.is_some() {
-                held.mesh = Arc::new(held.engine.mesh().clone());
+                held.mesh = held.engine.shared_mesh();
             }
             held.epoch = epoch;
             held.at_edit = before;
@@ -484,6 +505,7 @@ fn publish(held: &Held, converged: bool, tx: &mpsc::Sender<Report>) {
         surfaces,
         epoch: held.epoch,
         converged,
+        preview: false,
     })));
 }
 

@@ -2,13 +2,15 @@
 //! finished into a [`BakeResult`].
 
 use std::path::Path;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use radiant_scene::{Light, Scene, Sky, Surface};
-use radiant_visibility::Visibility;
+use radiant_visibility::{Bvh, Visibility};
 
 use super::edit::{self, Before, Moved, New, Old};
+use super::preview::{self, EditPreview};
 use super::record::Record;
 use super::refine::{Link, RefineStats, Walk};
 use super::solve::{HierSystem, LINK_BYTES, SweepScratch, Sweeping};
@@ -33,7 +35,9 @@ use crate::{BakeError, ParameterError};
 /// A clustered bake in progress: the mesh, the cluster tree and the links at every level, and
 /// the Jacobi sweeps over them.
 pub struct ClusterBake {
-    mesh: Mesh,
+    mesh: Arc<Mesh>,
+    /// The ray tracer over `mesh`, kept for an edit's preview ([`ClusterParams::edits`]).
+    bvh: Option<Arc<Bvh>>,
     tree: Tree,
     sys: HierSystem,
     surfaces: Vec<Surface>,
@@ -117,6 +121,8 @@ pub struct GeometryEdit {
 pub struct EditPhases {
     /// The edited scene meshed and its nodes matched to the old ones.
     pub meshing: f64,
+    /// The preview made and handed out ([`ClusterBake::edit_geometry_previewed`]).
+    pub preview: f64,
     /// Its BVH and cluster tree.
     pub visibility: f64,
     /// Direct light, sources and enclosed elements.
@@ -365,7 +371,8 @@ impl ClusterBake {
         );
         let b = b.unwrap_or_else(|| sys.source.clone());
         Ok(ClusterBake {
-            mesh,
+            mesh: Arc::new(mesh),
+            bvh: (cp.edits && has_emitters).then(|| Arc::new(bvh)),
             tree,
             sys,
             surfaces: scene.surfaces.clone(),
@@ -515,6 +522,11 @@ impl ClusterBake {
         &self.mesh
     }
 
+    /// The mesh, shared: what a published light refers to, without a copy.
+    pub fn shared_mesh(&self) -> Arc<Mesh> {
+        Arc::clone(&self.mesh)
+    }
+
     /// The scene's surfaces as the bake has them.
     pub fn surfaces(&self) -> &[Surface] {
         &self.surfaces
@@ -632,6 +644,22 @@ impl ClusterBake {
         progress: &(dyn Fn(Phase, usize, usize) + Sync),
         stop: Option<&AtomicBool>,
     ) -> Result<GeometryEdit, BakeError> {
+        self.edit_geometry_previewed(scene, progress, stop, None)
+    }
+
+    /// [`ClusterBake::edit_geometry`], which hands `preview` a first look at the edited light
+    /// as soon as the edited scene is meshed, before the refinement ([`EditPreview`]: the
+    /// carried light with the direct light traced again where it may have changed). No
+    /// preview when the edit is not a rigid move or removal of triangles, when materials,
+    /// lights or the sky change with it, or when the bake keeps no ray tracer (
+    /// [`ClusterParams::edits`] off, or after an edit that failed).
+    pub fn edit_geometry_previewed(
+        &mut self,
+        scene: &Scene,
+        progress: &(dyn Fn(Phase, usize, usize) + Sync),
+        stop: Option<&AtomicBool>,
+        preview: Option<&mut dyn FnMut(EditPreview)>,
+    ) -> Result<GeometryEdit, BakeError> {
         let started = Instant::now();
         let mut phases = EditPhases::default();
         let mut t = Instant::now();
@@ -647,9 +675,9 @@ impl ClusterBake {
             return Err(BakeError::NeedsRebuild);
         }
         let mut budget = Budget::new(Some(self.budget.limit));
-        let mesh = Mesh::adaptive(scene, &self.params.mesh, &mut |b| {
+        let mesh = Arc::new(Mesh::adaptive(scene, &self.params.mesh, &mut |b| {
             budget.reserve("the mesh", b)
-        })?;
+        })?);
         if mesh.frame != self.mesh.frame {
             return Err(BakeError::NeedsRebuild);
         }
@@ -667,6 +695,38 @@ impl ClusterBake {
             });
         }
         phases.meshing = lap();
+        // The old ray tracer serves the preview only: it goes before the new one is built.
+        let old_bvh = self.bvh.take();
+        if let (Some(show), Some(bvh)) = (preview, old_bvh.as_deref())
+            && scene.surfaces == self.surfaces
+            && scene.lights == self.lighting.lights
+            && scene.sky == self.lighting.sky
+        {
+            let before = preview::Before {
+                mesh: &self.mesh,
+                bvh,
+                masks: self.lighting.masks.as_ref(),
+                direct: self.lighting.direct.as_deref(),
+                rho: &self.sys.rho,
+                b: &self.b,
+                exposure: self.sys.exposure(),
+            };
+            let lit = preview::Lit {
+                lights: &scene.lights,
+                sky: scene.sky.as_ref(),
+                params: &self.params.ff,
+            };
+            if let Some(p) = preview::preview(&before, (&mesh, &matched), &lit, started) {
+                tracing::info!(
+                    seconds = p.seconds,
+                    retraced = p.retraced,
+                    "clustered bake: geometry edit previewed"
+                );
+                show(p);
+            }
+            phases.preview = lap();
+        }
+        drop(old_bvh);
         if self.record.is_none() && self.cp.edits {
             self.record = self.replayed_record();
             phases.replay = lap();
@@ -739,7 +799,7 @@ impl ClusterBake {
         let kept_nodes = before.as_ref().map_or(0, Before::kept_nodes);
         phases.matching = lap();
         let mut warnings = scene.warnings();
-        let inputs = (&mesh, &tree, &bvh as &dyn Visibility, &oracle);
+        let inputs = (&*mesh, &tree, &bvh as &dyn Visibility, &oracle);
         let (walk, eps, stats) = refine_within_budget(
             inputs,
             &self.params,
@@ -795,6 +855,7 @@ impl ClusterBake {
         let nodes = tree.len();
         self.fingerprint = fingerprint(scene, &self.params, &self.cp);
         self.mesh = mesh;
+        self.bvh = self.cp.edits.then(|| Arc::new(bvh));
         self.tree = tree;
         self.sys = sys;
         self.surfaces = scene.surfaces.clone();
@@ -980,7 +1041,14 @@ impl ClusterBake {
         let share: Vec<f64> = live.iter().map(|&l| crate::exposure::fraction(l)).collect();
         let system = System::exposed(&self.mesh, rho, source, links, &share);
         let dead = live.iter().map(|&l| l == 0).collect();
-        BakeResult::from_parts(self.mesh, system, b, surfaces, report, dead)
+        BakeResult::from_parts(
+            Arc::unwrap_or_clone(self.mesh),
+            system,
+            b,
+            surfaces,
+            report,
+            dead,
+        )
     }
 }
 

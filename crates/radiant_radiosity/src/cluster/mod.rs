@@ -32,6 +32,7 @@
 
 mod bake;
 mod edit;
+mod preview;
 pub mod record;
 pub mod refine;
 pub mod sh;
@@ -39,6 +40,7 @@ pub mod solve;
 pub mod tree;
 
 pub use bake::{ClusterBake, EditPhases, GeometryEdit};
+pub use preview::EditPreview;
 pub use refine::RefineStats;
 
 use std::sync::atomic::{AtomicBool, Ordering};
