@@ -219,9 +219,24 @@ impl RootMatch {
                 v.map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]),
             )
         };
-        let mut by_key: std::collections::HashMap<_, Vec<usize>> = std::collections::HashMap::new();
+        // Per key, its first old root; `next` chains the others with the same key, in order.
+        let mut first: rustc_hash::FxHashMap<_, u32> = rustc_hash::FxHashMap::default();
+        first.reserve(old.roots.len());
+        let mut next = vec![u32::MAX; old.roots.len()];
         for r in 0..old.roots.len() {
-            by_key.entry(key(old, r)).or_default().push(r);
+            match first.entry(key(old, r)) {
+                std::collections::hash_map::Entry::Vacant(v) => {
+                    v.insert(r as u32);
+                }
+                std::collections::hash_map::Entry::Occupied(o) => {
+                    // Rare (the same surface name, index and vertices twice): walk to the end.
+                    let mut at = *o.get() as usize;
+                    while next[at] != u32::MAX {
+                        at = next[at] as usize;
+                    }
+                    next[at] = r as u32;
+                }
+            }
         }
         let mut m = RootMatch {
             new_of_old_node: vec![u32::MAX; old.nodes.len()],
@@ -230,10 +245,13 @@ impl RootMatch {
             kept: vec![false; old.roots.len()],
         };
         for r in 0..new.roots.len() {
-            let Some(o) = by_key
-                .get(&key(new, r))
-                .and_then(|c| c.iter().copied().find(|&o| !m.kept[o]))
-            else {
+            let Some(o) = first.get(&key(new, r)).and_then(|&o| {
+                std::iter::successors(Some(o), |&o| {
+                    Some(next[o as usize]).filter(|&n| n != u32::MAX)
+                })
+                .map(|o| o as usize)
+                .find(|&o| !m.kept[o])
+            }) else {
                 continue;
             };
             let ((nlo, nhi), (olo, ohi)) = (root_nodes(new, r), root_nodes(old, o));

@@ -12,7 +12,7 @@
 //! interpolates between its own corners: the two sides then differ by the field's curvature
 //! over the edge, not by a step.
 
-use std::collections::HashMap;
+use rustc_hash::FxHashMap;
 
 use glam::DVec3;
 
@@ -108,7 +108,11 @@ impl SmoothField {
             let k = ((p - lo) / q).round();
             [k.x as i64, k.y as i64, k.z as i64]
         };
-        let mut slots: HashMap<[i64; 3], Vec<u32>> = HashMap::with_capacity(n * 2);
+        // Per position, its first vertex; `next` chains the others there, in the order they
+        // were made (one per plane the position's elements lie in).
+        let mut first: FxHashMap<[i64; 3], u32> = FxHashMap::default();
+        first.reserve(n);
+        let mut next: Vec<u32> = Vec::with_capacity(n * 2);
         let mut normal: Vec<DVec3> = Vec::with_capacity(n * 2);
         let mut sum: Vec<[f64; 4]> = Vec::with_capacity(n * 2);
         let mut corners = Vec::with_capacity(n);
@@ -118,17 +122,26 @@ impl SmoothField {
             let votes = w > 0.0 && rho[i].iter().any(|&r| r > 1e-6);
             let mut c = [0u32; 3];
             for (k, p) in node.v.iter().enumerate() {
-                let list = slots.entry(key(*p)).or_default();
-                let id = match list
-                    .iter()
-                    .find(|&&id| normal[id as usize].dot(node.normal) >= SAME_PLANE)
-                {
-                    Some(&id) => id,
+                let fresh = normal.len() as u32;
+                let head = *first.entry(key(*p)).or_insert(fresh);
+                let (mut at, mut found) = (head, None);
+                while at != fresh {
+                    if normal[at as usize].dot(node.normal) >= SAME_PLANE {
+                        found = Some(at);
+                        break;
+                    }
+                    if next[at as usize] == u32::MAX {
+                        next[at as usize] = fresh;
+                    }
+                    at = next[at as usize];
+                }
+                let id = match found {
+                    Some(id) => id,
                     None => {
                         normal.push(node.normal);
                         sum.push([0.0; 4]);
-                        list.push((normal.len() - 1) as u32);
-                        (normal.len() - 1) as u32
+                        next.push(u32::MAX);
+                        fresh
                     }
                 };
                 if votes {
