@@ -8,6 +8,7 @@
 use glam::DVec3;
 use radiant_scene::Scene;
 use radiant_visibility::{Bvh, Visibility};
+use rayon::prelude::*;
 
 use crate::form_factors::{self, FfContext, FormFactorKind};
 use crate::links::{self, Links, Oracle};
@@ -172,7 +173,6 @@ pub fn build(
 /// (The clustered bake measures how much of each element is exposed instead:
 /// [`crate::exposure`].)
 pub fn enclosed_elements(mesh: &Mesh, vis: &dyn Visibility, seed: u64) -> Vec<bool> {
-    use rayon::prelude::*;
     (0..mesh.element_count())
         .into_par_iter()
         .map(|leaf| {
@@ -219,17 +219,30 @@ impl RootMatch {
                 v.map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]),
             )
         };
-        // Per key, its first old root; `next` chains the others with the same key, in order.
-        let mut first: rustc_hash::FxHashMap<_, u32> = rustc_hash::FxHashMap::default();
+        // Each key's digest, in parallel; per digest, its first old root, `next` chaining the
+        // others with the same digest in order (the same key twice, or a collision).
+        let digests = |m: &Mesh| -> Vec<u64> {
+            use std::hash::{Hash, Hasher};
+            (0..m.roots.len())
+                .into_par_iter()
+                .with_min_len(4096)
+                .map(|r| {
+                    let mut h = rustc_hash::FxHasher::default();
+                    key(m, r).hash(&mut h);
+                    h.finish()
+                })
+                .collect()
+        };
+        let (old_digest, new_digest) = (digests(old), digests(new));
+        let mut first: rustc_hash::FxHashMap<u64, u32> = rustc_hash::FxHashMap::default();
         first.reserve(old.roots.len());
         let mut next = vec![u32::MAX; old.roots.len()];
-        for r in 0..old.roots.len() {
-            match first.entry(key(old, r)) {
+        for (r, &d) in old_digest.iter().enumerate() {
+            match first.entry(d) {
                 std::collections::hash_map::Entry::Vacant(v) => {
                     v.insert(r as u32);
                 }
                 std::collections::hash_map::Entry::Occupied(o) => {
-                    // Rare (the same surface name, index and vertices twice): walk to the end.
                     let mut at = *o.get() as usize;
                     while next[at] != u32::MAX {
                         at = next[at] as usize;
@@ -245,12 +258,12 @@ impl RootMatch {
             kept: vec![false; old.roots.len()],
         };
         for r in 0..new.roots.len() {
-            let Some(o) = first.get(&key(new, r)).and_then(|&o| {
+            let Some(o) = first.get(&new_digest[r]).and_then(|&o| {
                 std::iter::successors(Some(o), |&o| {
                     Some(next[o as usize]).filter(|&n| n != u32::MAX)
                 })
                 .map(|o| o as usize)
-                .find(|&o| !m.kept[o])
+                .find(|&o| !m.kept[o] && key(old, o) == key(new, r))
             }) else {
                 continue;
             };
@@ -380,4 +393,55 @@ pub fn relink(r: &Relink, params: &BakeParams) -> (Hierarchy, Links, links::Upda
         oracle: Some(estimates),
     };
     (hierarchy, links, stats)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::MeshParams;
+    use crate::scenes::add_surface;
+
+    fn mesh(scene: &Scene) -> Mesh {
+        Mesh::adaptive(scene, &MeshParams::default(), &mut |_| Ok(())).expect("meshes")
+    }
+
+    #[test]
+    fn roots_match_by_name_index_and_place_twins_in_order() {
+        let t = |x: f64| {
+            [
+                DVec3::new(x, 0., 0.),
+                DVec3::new(x + 1., 0., 0.),
+                DVec3::new(x, 1., 0.),
+            ]
+        };
+        // Two surfaces named alike, each with the same triangle first: twins by key.
+        let mut old = Scene::default();
+        add_surface(&mut old, "a", [0.5; 3], [0.0; 3], &[t(0.0), t(2.0)]);
+        add_surface(&mut old, "a", [0.5; 3], [0.0; 3], &[t(0.0)]);
+        add_surface(&mut old, "b", [0.5; 3], [1.0; 3], &[t(4.0), t(6.0)]);
+        let m = RootMatch::new(&mesh(&old), &mesh(&old));
+        assert!(m.unchanged());
+        // Each twin matched once, in order: the elements map onto themselves.
+        assert!(
+            m.old_of_new_leaf
+                .iter()
+                .enumerate()
+                .all(|(i, &o)| o == i as u32)
+        );
+        // One triangle of "b" moved (the bounding box the same): it went and came.
+        let mut new = old.clone();
+        new.triangles[3].vertices = t(6.0);
+        new.triangles[4].vertices = t(4.0);
+        let (a, b) = (mesh(&old), mesh(&new));
+        let m = RootMatch::new(&a, &b);
+        assert_eq!(m.added, [false, false, false, true, true]);
+        assert_eq!(m.kept, [true, true, true, false, false]);
+        let (lo, hi) = (
+            a.nodes[a.roots[3] as usize].leaf_lo,
+            b.nodes[b.roots[3] as usize].leaf_lo,
+        );
+        assert_eq!(lo, hi);
+        assert_eq!(m.old_of_new_leaf[lo as usize], u32::MAX);
+        assert_eq!(m.changed_triangles(&a, &b).len(), 4);
+    }
 }
