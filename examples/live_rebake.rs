@@ -15,8 +15,9 @@ use std::time::{Duration, Instant};
 use radiant::ecs::prelude::*;
 use radiant::radiosity::{BakeParams, Rgb};
 
-/// Published lights: (seconds since the change, radiosity per element).
-type Snapshots = Vec<(f64, Arc<Vec<Rgb>>)>;
+/// Published lights: (seconds since the change, radiosity per element, whether it is a
+/// geometry edit's preview).
+type Snapshots = Vec<(f64, Arc<Vec<Rgb>>, bool)>;
 
 /// Steps frames until converged; returns the published snapshots and the duration of every
 /// frame in milliseconds.
@@ -31,7 +32,11 @@ fn run(app: &mut App, t0: Instant) -> (Snapshots, Vec<f64>) {
         let lit = app.world.resource::<BakedLighting>();
         if lit.generation != seen && !app.world.resource::<BakeStatus>().stale {
             seen = lit.generation;
-            snaps.push((t0.elapsed().as_secs_f64(), lit.radiosity.clone()));
+            snaps.push((
+                t0.elapsed().as_secs_f64(),
+                lit.radiosity.clone(),
+                lit.preview,
+            ));
         }
         let s = app.world.resource::<BakeStatus>();
         if s.phase == BakePhase::Converged && !s.stale {
@@ -43,19 +48,20 @@ fn run(app: &mut App, t0: Instant) -> (Snapshots, Vec<f64>) {
     }
 }
 
-fn report(what: &str, snaps: &[(f64, Arc<Vec<Rgb>>)], frames: &mut [f64]) {
-    let Some((_, last)) = snaps.last() else {
+fn report(what: &str, snaps: &Snapshots, frames: &mut [f64]) {
+    let Some((_, last, _)) = snaps.last() else {
         return;
     };
     println!("{what}: error of each published light against the converged one");
     println!("  {:>9}  {:>10}", "t (ms)", "rel. RMS");
     let mut first_1pc = None;
-    for (t, b) in snaps {
+    for (t, b, preview) in snaps {
         let e = radiant::radiosity::metrics::relative_difference(b, last);
         if e < 0.01 && first_1pc.is_none() {
             first_1pc = Some(*t);
         }
-        println!("  {:9.1}  {:10.2e}", t * 1e3, e);
+        let what = if *preview { "  the edit's preview" } else { "" };
+        println!("  {:9.1}  {:10.2e}{what}", t * 1e3, e);
     }
     frames.sort_by(f64::total_cmp);
     println!(
