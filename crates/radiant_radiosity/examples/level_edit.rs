@@ -84,9 +84,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let t = Instant::now();
             let field = p.smooth_field(bake.surfaces());
             println!(
-                "preview after {:.3} s: direct light traced again for {} elements; its smooth field in {:.3} s more",
+                "preview after {:.3} s: direct light traced again for {} elements, light gathered for {} new ones; its smooth field in {:.3} s more",
                 p.seconds,
                 p.retraced,
+                p.gathered,
                 t.elapsed().as_secs_f64(),
             );
             drop(field);

@@ -293,7 +293,7 @@ fn textured(s: &Surface) -> bool {
 
 /// [`element_textures`], where `kept(element)` may give an element's footprints (reflectance,
 /// emission) without reading them: only the images that the others read are filtered.
-fn element_textures_keeping(
+pub(crate) fn element_textures_keeping(
     scene: &Scene,
     mesh: &Mesh,
     kept: &(dyn Fn(usize) -> Option<(Rgb, Rgb)> + Sync),

@@ -578,25 +578,52 @@ fn a_geometry_edits_preview_carries_the_light_and_moves_the_shadow_before_refini
     assert!(e_preview < 0.6 * e_old, "{e_preview} against {e_old}");
     assert!(e_preview < e_start, "{e_preview} against {e_start}");
 
-    // A removal is previewed; putting the block back (triangles that were not there) is not,
-    // nor a move that brings a material change along.
+    // A removal is previewed, and so is putting the block back: triangles that were not there,
+    // whose light the preview gathers.
     let mut gone = moved.clone();
     gone.triangles
         .retain(|t| !gone_name(&moved, t.surface).starts_with("tall_block"));
-    let mut shown = 0;
-    b.edit_geometry_previewed(&gone, &|_, _, _| {}, None, Some(&mut |_| shown += 1))
+    let mut shown = Vec::new();
+    b.edit_geometry_previewed(&gone, &|_, _, _| {}, None, Some(&mut |v| shown.push(v)))
         .expect("edits");
-    b.edit_geometry_previewed(&moved, &|_, _, _| {}, None, Some(&mut |_| shown += 10))
+    b.run_to_end(&|_, _, _| {}, &mut Watch::default())
+        .expect("solves");
+    b.edit_geometry_previewed(&moved, &|_, _, _| {}, None, Some(&mut |v| shown.push(v)))
         .expect("edits");
+    assert_eq!(shown.len(), 2);
+    assert_eq!(shown[0].gathered, 0);
+    let start = b.radiosity();
+    b.run_to_end(&|_, _, _| {}, &mut Watch::default())
+        .expect("solves");
+    let now = b.radiosity();
+    let back = &shown[1];
+    let block: Vec<usize> = (0..now.len())
+        .filter(|&i| {
+            let root = b.mesh().leaf_node(i as u32).root as usize;
+            gone_name(&moved, moved.triangles[root].surface).starts_with("tall_block")
+        })
+        .collect();
+    assert_eq!(back.gathered, block.len());
+    let sum = |x: &[radiant_radiosity::Rgb]| -> f64 {
+        block.iter().map(|&i| x[i].iter().sum::<f64>()).sum()
+    };
+    let (got, want, warm) = (sum(&back.radiosity), sum(&now), sum(&start));
+    let err =
+        |x: &[radiant_radiosity::Rgb]| radiant_radiosity::metrics::relative_difference(x, &now);
+    eprintln!(
+        "the block put back: its light {got:.4} in the preview, {want:.4} converged, {warm:.4} at the warm start; the level {:.4} against {:.4}",
+        err(&back.radiosity),
+        err(&start)
+    );
+    assert!((got - want).abs() < 0.2 * want, "{got} against {want}");
+    assert!(err(&back.radiosity) < err(&start));
+
+    // A move that brings a material change along has no preview.
     let mut recoloured =
         radiant_radiosity::scenes::translated(&moved, "short_block", glam::DVec3::X * -0.08);
     recoloured.surfaces[0].reflectance = [0.3; 3];
-    b.edit_geometry_previewed(
-        &recoloured,
-        &|_, _, _| {},
-        None,
-        Some(&mut |_| shown += 100),
-    )
-    .expect("edits");
-    assert_eq!(shown, 1);
+    let mut none = 0;
+    b.edit_geometry_previewed(&recoloured, &|_, _, _| {}, None, Some(&mut |_| none += 1))
+        .expect("edits");
+    assert_eq!(none, 0);
 }

@@ -649,10 +649,10 @@ impl ClusterBake {
 
     /// [`ClusterBake::edit_geometry`], which hands `preview` a first look at the edited light
     /// as soon as the edited scene is meshed, before the refinement ([`EditPreview`]: the
-    /// carried light with the direct light traced again where it may have changed). No
-    /// preview when the edit is not a rigid move or removal of triangles, when materials,
-    /// lights or the sky change with it, or when the bake keeps no ray tracer (
-    /// [`ClusterParams::edits`] off, or after an edit that failed).
+    /// carried light with the direct light traced again where it may have changed, new
+    /// triangles' light gathered). No preview when materials, lights or the sky change with
+    /// the edit, or when the bake keeps no ray tracer ([`ClusterParams::edits`] off, or after
+    /// an edit that failed).
     pub fn edit_geometry_previewed(
         &mut self,
         scene: &Scene,
@@ -708,10 +708,12 @@ impl ClusterBake {
                 masks: self.lighting.masks.as_ref(),
                 direct: self.lighting.direct.as_deref(),
                 rho: &self.sys.rho,
+                textures: self.lighting.textures.as_ref(),
                 b: &self.b,
                 exposure: self.sys.exposure(),
             };
             let lit = preview::Lit {
+                scene,
                 lights: &scene.lights,
                 sky: scene.sky.as_ref(),
                 params: &self.params.ff,
@@ -720,6 +722,7 @@ impl ClusterBake {
                 tracing::info!(
                     seconds = p.seconds,
                     retraced = p.retraced,
+                    gathered = p.gathered,
                     "clustered bake: geometry edit previewed"
                 );
                 show(p);

@@ -11,7 +11,11 @@
 //! - the direct light (punctual lights, sky) of the elements it may have changed for is traced
 //!   again, against the bake's own BVH with the moved triangles taken out at their old places
 //!   and put back at their new ones ([`radiant_visibility::Patched`]): no BVH is built. Its
-//!   change, reflected once (`ρ ΔE / π`), is added to the carried light.
+//!   change, reflected once (`ρ ΔE / π`), is added to the carried light;
+//! - an element of a triangle that was not there (or whose subdivision changed) has no light to
+//!   carry: it takes its emission, its direct light, and the light its hemisphere meets in the
+//!   preview ([`FRESH_RAYS`] cosine-weighted rays, one bounce), with reflectance from its
+//!   texture footprint as a fresh bake reads it (new triangles block rays unmasked).
 //!
 //! What changed is the moved triangles' old and new bounding box. An element's direct light
 //! may have changed when it moved, or when its shadow segment towards a punctual light crosses
@@ -20,16 +24,15 @@
 //! preview leaves out is the change in bounced light: the light the moved prop blocks or sends
 //! between other surfaces, and its own bounced light at the new place.
 //!
-//! There is no preview when the edit adds triangles that were not there, changes a moved
-//! triangle's subdivision, or changes materials, lights or the sky with the geometry: then the
+//! There is no preview when materials, lights or the sky change with the geometry: then the
 //! edit's first sweep is the first light.
 
 use std::collections::HashMap;
 use std::sync::Arc;
 
 use glam::DVec3;
-use radiant_scene::{AlphaMasks, Light, Sky, Surface};
-use radiant_visibility::{Bvh, Patched};
+use radiant_scene::{AlphaMasks, Light, Scene, Sky, Surface};
+use radiant_visibility::{Bvh, Patched, Visibility};
 use rayon::prelude::*;
 
 use crate::FormFactorParams;
@@ -53,6 +56,8 @@ pub struct EditPreview {
     pub exposure: Vec<u8>,
     /// Elements whose direct light was traced again.
     pub retraced: usize,
+    /// Elements of new triangles, whose light was gathered ([`FRESH_RAYS`] rays each).
+    pub gathered: usize,
     /// Seconds from the edit's start to the preview.
     pub seconds: f64,
 }
@@ -84,12 +89,15 @@ pub(super) struct Before<'a> {
     /// Per element: direct irradiance (`None`: no lights and no sky).
     pub direct: Option<&'a [Rgb]>,
     pub rho: &'a [Rgb],
+    /// Per element: the texture footprints (`None`: no textures).
+    pub textures: Option<&'a crate::input::ElementTextures>,
     pub b: &'a [Rgb],
     pub exposure: &'a [u8],
 }
 
-/// The edited scene's lights, sky and tracing parameters.
+/// The edited scene, its lights, sky and tracing parameters.
 pub(super) struct Lit<'a> {
+    pub scene: &'a Scene,
     pub lights: &'a [Light],
     pub sky: Option<&'a Sky>,
     pub params: &'a FormFactorParams,
@@ -104,21 +112,60 @@ pub(super) fn preview(
     started: std::time::Instant,
 ) -> Option<EditPreview> {
     let (of, came) = counterparts(old.mesh, mesh, matched)?;
-    let mut b: Vec<Rgb> = of.iter().map(|&o| old.b[o as usize]).collect();
-    let rho: Vec<Rgb> = of.iter().map(|&o| old.rho[o as usize]).collect();
-    let exposure: Vec<u8> = of.iter().map(|&o| old.exposure[o as usize]).collect();
+    let fresh: Vec<u32> = (0..of.len() as u32)
+        .filter(|&i| of[i as usize] == u32::MAX)
+        .collect();
+    let carried = |v: &[Rgb], i: usize, none: Rgb| v.get(of[i] as usize).copied().unwrap_or(none);
+    // New elements' materials read as a fresh bake reads them (only when there are any).
+    let (fresh_rho, emission) = if fresh.is_empty() {
+        (Vec::new(), Vec::new())
+    } else {
+        fresh_materials(old, lit.scene, mesh, &of)
+    };
+    let or_zero = |v: &[Rgb], i: usize| v.get(i).copied().unwrap_or([0.0; 3]);
+    let rho: Vec<Rgb> = (0..of.len())
+        .map(|i| carried(old.rho, i, or_zero(&fresh_rho, i)))
+        .collect();
+    let mut b: Vec<Rgb> = (0..of.len())
+        .map(|i| carried(old.b, i, or_zero(&emission, i)))
+        .collect();
+    let exposure: Vec<u8> = (0..of.len())
+        .map(|i| old.exposure.get(of[i] as usize).copied())
+        .map(|e| e.unwrap_or(crate::exposure::POINTS as u8))
+        .collect();
+    let vis = patched(old, mesh, matched, &came);
     let mut retraced = 0;
     if let Some(direct) = old.direct {
-        let (affected, now) = retrace(old, (mesh, matched), lit, &came);
+        let (affected, now) = retrace(old, (mesh, matched), lit, &vis);
         for (&leaf, e) in affected.iter().zip(&now) {
-            let (leaf, o) = (leaf as usize, of[leaf as usize] as usize);
+            let leaf = leaf as usize;
+            let was = carried(direct, leaf, [0.0; 3]);
             for c in 0..3 {
-                let change = rho[leaf][c] * (e[c] - direct[o][c]) / std::f64::consts::PI;
+                let change = rho[leaf][c] * (e[c] - was[c]) / std::f64::consts::PI;
                 let v = b[leaf][c] + change;
                 b[leaf][c] = if v.is_finite() { v.max(0.0) } else { 0.0 };
             }
         }
         retraced = affected.len();
+    }
+    let gathered = gather(
+        &Traced {
+            old,
+            mesh,
+            matched,
+            vis: &vis,
+            came: &came,
+        },
+        &fresh,
+        &b,
+        lit.params.seed,
+    );
+    for (&leaf, h) in fresh.iter().zip(&gathered) {
+        let leaf = leaf as usize;
+        for c in 0..3 {
+            let v = b[leaf][c] + rho[leaf][c] * h[c];
+            b[leaf][c] = if v.is_finite() { v.max(0.0) } else { 0.0 };
+        }
     }
     Some(EditPreview {
         mesh: Arc::clone(mesh),
@@ -126,11 +173,82 @@ pub(super) fn preview(
         rho,
         exposure,
         retraced,
+        gathered: fresh.len(),
         seconds: started.elapsed().as_secs_f64(),
     })
 }
 
-/// Each moved triangle's root in the new mesh and in the old one.
+/// Reflectance and emission per element of the edited mesh, as a fresh bake reads them: the
+/// texture footprints of the elements with a counterpart `of` are the old ones, the others'
+/// are read.
+fn fresh_materials(old: &Before, scene: &Scene, mesh: &Mesh, of: &[u32]) -> (Vec<Rgb>, Vec<Rgb>) {
+    let kept = |leaf: usize| -> Option<(Rgb, Rgb)> {
+        let t = old.textures?;
+        let o = *of.get(leaf)? as usize;
+        Some((*t.reflectance.get(o)?, *t.emission.get(o)?))
+    };
+    let textures = crate::input::element_textures_keeping(scene, mesh, &kept);
+    crate::input::materials(&scene.surfaces, mesh, textures.as_ref())
+}
+
+/// Rays per element of a new triangle in the preview's gather.
+pub const FRESH_RAYS: u32 = 64;
+
+/// What the preview traces against: the old scene patched to the edited one.
+struct Traced<'a> {
+    old: &'a Before<'a>,
+    mesh: &'a Mesh,
+    matched: &'a RootMatch,
+    vis: &'a Patched<'a>,
+    came: &'a [(u32, u32)],
+}
+
+impl Traced<'_> {
+    /// The element of the edited mesh a ray from `origin` along `dir` meets on its front.
+    fn hit(&self, origin: DVec3, dir: DVec3) -> Option<u32> {
+        let h = (self.vis)
+            .closest_hit(origin.as_vec3(), dir.as_vec3(), f32::INFINITY)
+            .filter(|h| h.front)?;
+        let old_roots = &self.old.mesh.roots;
+        let root = match (h.triangle as usize).checked_sub(old_roots.len()) {
+            Some(k) => self.came[k].0,
+            None => {
+                let node = self.matched.new_of_old_node[old_roots[h.triangle as usize] as usize];
+                self.mesh.nodes[node as usize].root
+            }
+        };
+        Some(self.mesh.locate(root, f64::from(h.u), f64::from(h.v)))
+    }
+}
+
+/// Per element of `leaves`: the light `b` its hemisphere meets (irradiance over π, to be
+/// multiplied by reflectance), by [`FRESH_RAYS`] cosine-weighted rays seeded by its stable id.
+fn gather(t: &Traced, leaves: &[u32], b: &[Rgb], seed: u64) -> Vec<Rgb> {
+    (leaves.par_iter())
+        .with_min_len(16)
+        .map(|&leaf| {
+            let node = t.mesh.leaf_node(leaf);
+            let id = t.mesh.stable_id(t.mesh.leaves[leaf as usize]);
+            let mut rng = crate::rng::Rng::new(crate::rng::hash(seed, id, 0x9A7));
+            let (tn, bn) = node.normal.any_orthonormal_pair();
+            let origin = node.centroid + node.normal * 1e-5;
+            let mut sum = DVec3::ZERO;
+            for _ in 0..FRESH_RAYS {
+                let (u1, u2) = (rng.f64(), rng.f64());
+                let (r, phi) = (u1.sqrt(), std::f64::consts::TAU * u2);
+                let dir =
+                    tn * (r * phi.cos()) + bn * (r * phi.sin()) + node.normal * (1.0 - u1).sqrt();
+                if let Some(hit) = t.hit(origin, dir) {
+                    sum += DVec3::from(b[hit as usize]);
+                }
+            }
+            (sum / f64::from(FRESH_RAYS)).to_array()
+        })
+        .collect()
+}
+
+/// Each triangle that came: its root in the new mesh, and the one it was in the old
+/// (`u32::MAX`: none).
 type Moves = Vec<(u32, u32)>;
 
 /// The elements whose direct light may have changed, and their direct irradiance now.
@@ -138,7 +256,7 @@ fn retrace(
     old: &Before,
     (mesh, matched): (&Mesh, &RootMatch),
     lit: &Lit,
-    came: &[(u32, u32)],
+    vis: &Patched,
 ) -> (Vec<u32>, Vec<Rgb>) {
     let (lo, hi) = changed_bounds(&matched.changed_triangles(old.mesh, mesh));
     let moved = |leaf: u32| matched.added[mesh.leaf_node(leaf).root as usize];
@@ -147,16 +265,15 @@ fn retrace(
         .with_min_len(4096)
         .filter(|&leaf| moved(leaf) || may_change(mesh, leaf, lit, (lo, hi)))
         .collect();
-    let vis = patched(old, mesh, matched, came);
     let now =
-        crate::input::direct_irradiance_of(lit.lights, lit.sky, mesh, &vis, lit.params, &affected);
+        crate::input::direct_irradiance_of(lit.lights, lit.sky, mesh, vis, lit.params, &affected);
     (affected, now)
 }
 
-/// Per new element, the old element it carries the light of: the same one where its triangle
-/// stayed; for a triangle that moved, the one at the same place on the triangle it was (same
-/// root key, same subdivision); and each moved triangle's new and old root. `None` when an
-/// element has none.
+/// Per new element, the old element it carries the light of (`u32::MAX`: none): the same one
+/// where its triangle stayed; for a triangle that moved, the one at the same place on the
+/// triangle it was (same root key, same subdivision). And each triangle that came, with the
+/// one it was (`u32::MAX`: none). `None` for a mesh that does not come from `matched`.
 fn counterparts(old: &Mesh, new: &Mesh, matched: &RootMatch) -> Option<(Vec<u32>, Moves)> {
     let mut of = matched.old_of_new_leaf.clone();
     let mut went: HashMap<u64, Vec<usize>> = HashMap::new();
@@ -169,17 +286,20 @@ fn counterparts(old: &Mesh, new: &Mesh, matched: &RootMatch) -> Option<(Vec<u32>
     };
     let mut came = Vec::new();
     for (r, _) in matched.added.iter().enumerate().filter(|(_, a)| **a) {
-        let o = went.get_mut(new.root_key.get(r)?)?.pop()?;
+        let key = new.root_key.get(r)?;
+        let Some(o) = went.get_mut(key).and_then(Vec::pop) else {
+            came.push((r as u32, u32::MAX));
+            continue;
+        };
         came.push((r as u32, o as u32));
         let ((nlo, nhi), (olo, ohi)) = (span(new, r), span(old, o));
-        if nhi - nlo != ohi - olo || new.patch_depth.get(r) != old.patch_depth.get(o) {
-            return None;
-        }
-        for k in 0..(nhi - nlo) {
-            of[nlo + k] = (olo + k) as u32;
+        if nhi - nlo == ohi - olo && new.patch_depth.get(r) == old.patch_depth.get(o) {
+            for k in 0..(nhi - nlo) {
+                of[nlo + k] = (olo + k) as u32;
+            }
         }
     }
-    (!of.contains(&u32::MAX)).then_some((of, came))
+    (of.len() == new.element_count()).then_some((of, came))
 }
 
 /// The bounding box of `tris` (local frame), grown by a hair.
@@ -235,7 +355,7 @@ fn segment_meets_box(a: DVec3, b: DVec3, lo: DVec3, hi: DVec3) -> bool {
 }
 
 /// The old BVH without the triangles that went, with those that came; `came` pairs each new
-/// root with the old one it was, whose alpha mask it keeps.
+/// root with the old one it was, whose alpha mask it keeps (one that was not there is opaque).
 fn patched<'a>(
     old: &'a Before,
     mesh: &Mesh,
@@ -256,7 +376,7 @@ fn patched<'a>(
             let (marks, masks, was2) = (Arc::clone(masks), Arc::clone(masks), Arc::clone(&was));
             Bvh::with_filter(
                 &tris,
-                move |i| marks.is_masked(was[i as usize]),
+                move |i| was[i as usize] != u32::MAX && marks.is_masked(was[i as usize]),
                 Arc::new(move |i: u32, u: f32, v: f32| masks.blocks(was2[i as usize], u, v)),
             )
         }
@@ -318,16 +438,19 @@ mod tests {
                 masks: None,
                 direct: Some(&old_direct),
                 rho: &zero,
+                textures: None,
                 b: &zero,
                 exposure: &[],
             };
             let ff = FormFactorParams::default();
             let lit = Lit {
+                scene: &moved,
                 lights: &moved.lights,
                 sky: None,
                 params: &ff,
             };
-            let (affected, now) = retrace(&before, (&mesh, &matched), &lit, &came);
+            let vis = patched(&before, &mesh, &matched, &came);
+            let (affected, now) = retrace(&before, (&mesh, &matched), &lit, &vis);
             // Traced against the old BVH patched: what a BVH of the moved scene gives.
             for (&leaf, e) in affected.iter().zip(&now) {
                 assert_eq!(*e, fresh[leaf as usize], "{name}: element {leaf}");
