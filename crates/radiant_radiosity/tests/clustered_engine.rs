@@ -228,10 +228,10 @@ fn same_links(a: &ClusterBake, b: &ClusterBake) -> bool {
             .eq(y.ff.iter().map(|f| f.to_bits()))
 }
 
-#[test]
-fn a_geometry_edit_refines_only_what_it_touches_and_equals_a_fresh_bake() {
-    // A level: the box with every triangle split in 16 (608 input triangles), and a sun
-    // through the open side so that moving a block changes direct light too.
+/// A level: the box with every triangle split in 16 (608 input triangles), and a sun through
+/// the open side so that moving a block changes direct light too; baked clustered and
+/// converged.
+fn sunlit_level() -> (Scene, BakeParams, ClusterBake) {
     let mut scene = radiant_radiosity::scenes::tessellated(
         &radiant_scene::builtin("cornell-box").expect("builtin"),
         2,
@@ -241,6 +241,12 @@ fn a_geometry_edit_refines_only_what_it_touches_and_equals_a_fresh_bake() {
     let mut b = fresh(&scene, &p);
     b.run_to_end(&|_, _, _| {}, &mut Watch::default())
         .expect("solves");
+    (scene, p, b)
+}
+
+#[test]
+fn a_geometry_edit_refines_only_what_it_touches_and_equals_a_fresh_bake() {
+    let (scene, p, mut b) = sunlit_level();
     let before = b.links();
     let shift = |s: &Scene, name: &str, dx: f64| {
         radiant_radiosity::scenes::translated(s, name, glam::DVec3::new(dx, 0.0, 0.0))
@@ -529,16 +535,8 @@ fn a_clustered_results_smooth_field_is_the_bakes_own() {
 
 #[test]
 fn a_geometry_edits_preview_carries_the_light_and_moves_the_shadow_before_refining() {
-    // The tessellated box under a sun, converged; the short block moved 8 cm.
-    let mut scene = radiant_radiosity::scenes::tessellated(
-        &radiant_scene::builtin("cornell-box").expect("builtin"),
-        2,
-    );
-    scene.lights.push(sun());
-    let p = params();
-    let mut b = fresh(&scene, &p);
-    b.run_to_end(&|_, _, _| {}, &mut Watch::default())
-        .expect("solves");
+    // The short block moved 8 cm.
+    let (scene, _, mut b) = sunlit_level();
     let old = b.radiosity();
     let moved = radiant_radiosity::scenes::translated(&scene, "short_block", glam::DVec3::X * 0.08);
     let mut preview = None;
