@@ -714,8 +714,6 @@ impl ClusterBake {
             };
             let lit = preview::Lit {
                 scene,
-                lights: &scene.lights,
-                sky: scene.sky.as_ref(),
                 params: &self.params.ff,
             };
             if let Some(p) = preview::preview(&before, (&mesh, &matched), &lit, started) {

@@ -31,7 +31,7 @@ use std::collections::HashMap;
 use std::sync::Arc;
 
 use glam::DVec3;
-use radiant_scene::{AlphaMasks, Light, Scene, Sky, Surface};
+use radiant_scene::{AlphaMasks, Scene, Surface};
 use radiant_visibility::{Bvh, Patched, Visibility};
 use rayon::prelude::*;
 
@@ -95,11 +95,9 @@ pub(super) struct Before<'a> {
     pub exposure: &'a [u8],
 }
 
-/// The edited scene, its lights, sky and tracing parameters.
+/// The edited scene (its lights and sky light it) and the tracing parameters.
 pub(super) struct Lit<'a> {
     pub scene: &'a Scene,
-    pub lights: &'a [Light],
-    pub sky: Option<&'a Sky>,
     pub params: &'a FormFactorParams,
 }
 
@@ -265,8 +263,14 @@ fn retrace(
         .with_min_len(4096)
         .filter(|&leaf| moved(leaf) || may_change(mesh, leaf, lit, (lo, hi)))
         .collect();
-    let now =
-        crate::input::direct_irradiance_of(lit.lights, lit.sky, mesh, vis, lit.params, &affected);
+    let now = crate::input::direct_irradiance_of(
+        &lit.scene.lights,
+        lit.scene.sky.as_ref(),
+        mesh,
+        vis,
+        lit.params,
+        &affected,
+    );
     (affected, now)
 }
 
@@ -319,14 +323,14 @@ fn may_change(mesh: &Mesh, leaf: u32, lit: &Lit, (lo, hi): (DVec3, DVec3)) -> bo
         return false;
     }
     let x = mesh.leaf_node(leaf).centroid;
-    let crosses = lit.lights.iter().any(|light| {
+    let crosses = lit.scene.lights.iter().any(|light| {
         let target = match light.kind {
             radiant_scene::LightKind::Directional => x - light.direction * 4.0,
             _ => mesh.frame.to_local(light.position),
         };
         segment_meets_box(x, target, lo, hi)
     });
-    let near = lit.sky.is_some_and(|s| !s.is_dark()) && {
+    let near = lit.scene.sky.as_ref().is_some_and(|s| !s.is_dark()) && {
         let reach = 2.0 * (hi - lo).length();
         x.clamp(lo, hi).distance(x) <= reach
     };
@@ -389,6 +393,7 @@ fn patched<'a>(
 mod tests {
     use super::*;
     use crate::mesh::MeshParams;
+    use radiant_scene::Light;
 
     /// The tessellated box under a sun and a point light, meshed, with its BVH and direct light.
     fn lit_box(scene: &radiant_scene::Scene) -> (Mesh, Bvh, Vec<Rgb>) {
@@ -445,8 +450,6 @@ mod tests {
             let ff = FormFactorParams::default();
             let lit = Lit {
                 scene: &moved,
-                lights: &moved.lights,
-                sky: None,
                 params: &ff,
             };
             let vis = patched(&before, &mesh, &matched, &came);
