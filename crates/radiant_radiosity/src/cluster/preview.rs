@@ -52,11 +52,11 @@ pub struct EditPreview {
     /// Per element: reflectance.
     pub rho: Vec<Rgb>,
     /// Per element: its exposure before the edit (the probes that escaped, of
-    /// [`crate::exposure::POINTS`]).
+    /// [`crate::exposure::POINTS`]; all of them for an element of a new triangle).
     pub exposure: Vec<u8>,
     /// Elements whose direct light was traced again.
     pub retraced: usize,
-    /// Elements of new triangles, whose light was gathered ([`FRESH_RAYS`] rays each).
+    /// Elements of new triangles, whose light was gathered (64 cosine-weighted rays each).
     pub gathered: usize,
     /// Seconds from the edit's start to the preview.
     pub seconds: f64,
@@ -190,7 +190,7 @@ fn fresh_materials(old: &Before, scene: &Scene, mesh: &Mesh, of: &[u32]) -> (Vec
 }
 
 /// Rays per element of a new triangle in the preview's gather.
-pub const FRESH_RAYS: u32 = 64;
+const FRESH_RAYS: u32 = 64;
 
 /// What the preview traces against: the old scene patched to the edited one.
 struct Traced<'a> {
