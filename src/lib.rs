@@ -4,7 +4,7 @@
 //! This facade re-exports the workspace's crates:
 //! - [`scene`]: glTF import with validation, the builtin Cornell box;
 //! - [`radiosity`]: meshing, form factors, solvers, error metrics, light maps (pure CPU);
-//! - [`reference`]: a progressive CPU path tracer over the same scene model, the reference the
+//! - [`reference`](mod@reference): a progressive CPU path tracer over the same scene model, the reference the
 //!   bake's error is measured against;
 //! - [`color`]: sRGB transfer functions, CIE colorimetry and tone-map operators;
 //! - [`ecs`]: scenes as `bevy_ecs` entities, the background bake and live rebake, a headless app;

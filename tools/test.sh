@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Radiant's whole test suite, as CI runs it: formatting, lints, every test.
+# Radiant's whole test suite, as CI runs it: formatting, lints, the API docs' links, every test.
 #
 # Needs: the Rust toolchain pinned in rust-toolchain.toml (1.95.0, with rustfmt and clippy), a C
 # compiler for build scripts, a Vulkan driver for the GPU tests: with no GPU, Mesa's
@@ -85,6 +85,9 @@ cargo fmt --all --check
 
 say "cargo clippy (all targets, warnings are errors)"
 cargo clippy --workspace --all-targets --locked -- -D warnings
+
+say "cargo doc (broken or private links are errors)"
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --locked
 
 say "cargo test (workspace)"
 cargo test --workspace --locked --no-fail-fast

@@ -1,4 +1,4 @@
-//! The standard frame: G-buffer → [SSAO] → lighting → [bloom] → tone mapping → [blur] → [Sobel].
+//! The standard frame: G-buffer → \[SSAO\] → lighting → \[bloom\] → tone mapping → \[blur\] → \[Sobel\].
 //!
 //! Bracketed effects are `Option`s in [`FrameSettings`]: `None` means their passes are never
 //! added, so the compiled graph has neither their passes nor their textures. The graph is

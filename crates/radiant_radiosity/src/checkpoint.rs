@@ -1,7 +1,7 @@
 //! Bake checkpoints: the links (form factors), the enclosed-element flags (clustered: each
 //! element's exposure) and the solution, written atomically, so a long bake resumes after a
 //! restart without recomputing form factors.
-//! Versions 1 and 2 hold a per-triangle hierarchy ([`read`], [`write`]), versions 3 and 4 a
+//! Versions 1 and 2 hold a per-triangle hierarchy ([`read`](read()), [`write`](write())), versions 3 and 4 a
 //! clustered one ([`read_clustered`], [`write_clustered`]); each reader refuses the other's
 //! files with [`BakeError::CheckpointHierarchy`].
 //!

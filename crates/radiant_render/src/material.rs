@@ -112,7 +112,7 @@ pub struct GpuMaterial {
     pub texture: wgpu::TextureView,
     /// Its sampler.
     pub sampler: wgpu::Sampler,
-    /// [`MaterialUniform`].
+    /// The material's uniform buffer (`MaterialUniform`).
     pub uniform: wgpu::Buffer,
     /// First vertex.
     pub first: u32,

@@ -288,7 +288,7 @@ pub struct SceneChanges {
     pub geometry: bool,
     /// Only materials of static surfaces changed.
     pub materials: bool,
-    /// Punctual lights were added, removed, moved or changed, or the sky ([`SceneSky`]).
+    /// Punctual lights were added, removed, moved or changed, or the sky ([`SceneSky`](crate::scene::SceneSky)).
     pub lights: bool,
 }
 

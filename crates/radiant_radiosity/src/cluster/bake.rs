@@ -568,7 +568,7 @@ impl ClusterBake {
 
     /// Per element: how many of its probe points are exposed, of [`crate::exposure::POINTS`].
     /// Its radiosity is that of its exposed part; [`crate::exposure::fraction`] of its area
-    /// counts in a surface's mean ([`metrics::surface_means_exposed`]).
+    /// counts in a surface's mean ([`crate::metrics::surface_means_exposed`]).
     pub fn exposure(&self) -> &[u8] {
         self.sys.exposure()
     }

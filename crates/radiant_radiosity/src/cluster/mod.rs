@@ -23,7 +23,7 @@
 //! `try_reserve`, so an allocator's refusal is that error too, never an abort.
 //!
 //! [`ClusterBake`] is the same engine shape as the per-triangle [`crate::Bake`]: built (or
-//! resumed from a version-4 (or 3) checkpoint), then stepped one sweep at a time ([`solve::Info`], the
+//! resumed from a version-4 (or 3) checkpoint), then stepped one sweep at a time ([`Info`], the
 //! stopping rule of [`crate::solve::Stall`]); material and light edits keep its links, and a
 //! geometry edit refines only what it touches ([`ClusterBake::edit_geometry`], bit for bit a
 //! fresh bake's links). What it does not do (the per-triangle bake does): the hemicube and
@@ -90,7 +90,7 @@ impl Default for ClusterParams {
 /// Times the threshold may be raised to fit the memory budget.
 pub const COARSEN_STEPS: u32 = 3;
 
-/// What the clustered bake reports beyond [`BakeReport`].
+/// What the clustered bake reports beyond [`crate::BakeReport`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct ClusterReport {
     /// Clusters above the input triangles.

@@ -5,7 +5,7 @@
 //! children while its estimated transport `F × B̂` exceeds `refinement × B_ambient`, otherwise it
 //! becomes a link. `F` is the exact unoccluded point-to-polygon value, so the links of a receiver
 //! tile everything it sees and, unoccluded, sum to exactly 1 in a closed scene (the furnace
-//! holds). The chosen [`FormFactorMethod`] then computes each link's value, occlusion included.
+//! holds). The chosen [`crate::FormFactorKind`] then computes each link's value, occlusion included.
 //!
 //! With `hierarchical = false` every element links to every patch it sees (Cohen et al.'s
 //! patch–element substructuring): the classic O(elements × patches) baseline.

@@ -123,7 +123,7 @@ impl Pyramid {
     /// source is not wholly in front of `other`'s plane and `other` not wholly beyond the
     /// source's. `margin` is how far the rays may stray from the exact shaft (their origin's
     /// offset and rounding); a ray caster also sees `other` a little past its edges
-    /// ([`Pyramid::slack`]). Both must be seen from the same point.
+    /// (`Pyramid::slack`). Both must be seen from the same point.
     pub fn shaft_may_cross(&self, other: &Pyramid, margin: f64) -> bool {
         !(other.keeps_clear_of(&self.v, margin) || self.shaft_clears(other, margin))
     }

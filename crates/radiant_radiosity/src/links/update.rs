@@ -99,7 +99,7 @@ struct Cand {
 
 /// Updates links after an edit (`old`: the old links, in the old numbering), keeping the
 /// value of every link whose receiver and source did not move and whose shaft cannot cross a
-/// triangle that went or came. The result equals a fresh [`build`] with `oracle`.
+/// triangle that went or came. The result equals a fresh [`build`](super::build()) with `oracle`.
 ///
 /// A receiver that did not move keeps its old row's structure for the roots whose oracle
 /// estimates did not change (when the old oracle and the old fully occluded links are known
