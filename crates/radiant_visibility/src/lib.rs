@@ -65,6 +65,15 @@ impl<F: Fn(u32, f32, f32) -> bool + Send + Sync> HitFilter for F {
     }
 }
 
+/// Rays within this angle (radians) of a triangle's plane do not meet it ([`Tri::edge_on`]).
+const EDGE_ON: f32 = 1e-5;
+
+/// How far each triangle's box in the BVH reaches past the triangle: relative to its largest
+/// extent, and absolute (local units). The barycentric slack of [`Tri::intersect`] counts hits
+/// up to a millionth of an edge outside a triangle; a box as tight as the triangle, quantised
+/// differently in another BVH, would hold those hits in one BVH and not in the other.
+const BOX_SLACK: (f32, f32) = (1e-5, 1e-7);
+
 #[derive(Clone, Copy, Debug)]
 struct Tri {
     v0: Vec3A,
@@ -105,8 +114,23 @@ impl Tri {
             return None;
         }
         let t = self.e2.dot(q) * inv;
+        if t < tmin || t > tmax || self.edge_on(d, det) {
+            return None;
+        }
         // det = -d·N: positive when the ray meets the front (counter-clockwise) side.
-        (t >= tmin && t <= tmax).then_some((t, u, v, det > 0.0))
+        Some((t, u, v, det > 0.0))
+    }
+
+    /// Whether the ray along `d` lies in the triangle's plane, within [`EDGE_ON`] radians
+    /// (`det = -d·N`). Such a ray meets the triangle by rounding alone, and whether the
+    /// triangle is tested at all depends on which of a BVH's quantised boxes hold it: a BVH
+    /// built over other triangles beside it would answer otherwise (a geometry edit that keeps
+    /// form factors computed with the old BVH would then differ from a fresh bake). Seen
+    /// edge-on, a triangle blocks nothing.
+    #[inline]
+    fn edge_on(&self, d: Vec3A, det: f32) -> bool {
+        let n = self.e1.cross(self.e2);
+        det * det <= EDGE_ON * EDGE_ON * d.length_squared() * n.length_squared()
     }
 }
 
@@ -218,16 +242,18 @@ impl Bvh {
                 filter: None,
             };
         }
-        let obvhs_tris: Vec<obvhs::triangle::Triangle> = triangles
+        // Each triangle's box, grown by the slack its hits may reach past it, so that whether a
+        // hit counts depends on the triangle alone, not on the BVH around it.
+        let boxes: Vec<obvhs::aabb::Aabb> = triangles
             .iter()
-            .map(|t| obvhs::triangle::Triangle {
-                v0: t[0].into(),
-                v1: t[1].into(),
-                v2: t[2].into(),
+            .map(|t| {
+                let (lo, hi) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
+                let grow = (hi - lo).max_element() * BOX_SLACK.0 + BOX_SLACK.1;
+                obvhs::aabb::Aabb::new(Vec3A::from(lo) - grow, Vec3A::from(hi) + grow)
             })
             .collect();
-        let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
-            &obvhs_tris,
+        let bvh = obvhs::cwbvh::builder::build_cwbvh(
+            &boxes,
             BvhBuildParams::medium_build(),
             &mut Duration::default(),
         );
@@ -489,6 +515,61 @@ mod tests {
             blocked > 500 && changed > 100,
             "{blocked} blocked, {changed} changed"
         );
+    }
+
+    #[test]
+    fn answers_do_not_depend_on_the_triangles_around() {
+        // A floor of small triangles and walls across it, all turned off the axes (so that
+        // segments in the floor's plane meet it by rounding); segments in that plane.
+        let turn = glam::Quat::from_axis_angle(Vec3::new(1.0, 2.0, 3.0).normalize(), 0.7);
+        let mut tris = Vec::new();
+        for i in 0..20 {
+            for j in 0..20 {
+                let (x, z) = (i as f32 * 0.1, j as f32 * 0.1);
+                let p = |a: f32, b: f32| Vec3::new(x + a, 0.1, z + b);
+                tris.push([p(0., 0.), p(0.1, 0.), p(0., 0.1)]);
+                tris.push([p(0.1, 0.), p(0.1, 0.1), p(0., 0.1)]);
+            }
+        }
+        for k in 0..5 {
+            let x = 0.3 + 0.4 * k as f32;
+            tris.push([
+                Vec3::new(x, 0.1, 0.),
+                Vec3::new(x, 0.5, 0.),
+                Vec3::new(x, 0.1, 2.),
+            ]);
+        }
+        // The same triangles among others far off: a BVH of another shape around them.
+        let tris: Vec<[Vec3; 3]> = tris.iter().map(|t| t.map(|p| turn * p)).collect();
+        let mut rng = Rng(0x1234_5678_9ABC_DEF1);
+        let mut more = tris.clone();
+        more.extend(
+            soup(&mut rng, 3000)
+                .into_iter()
+                .map(|t| t.map(|p| p + Vec3::splat(5.0))),
+        );
+        let (a, b) = (Bvh::new(&tris), Bvh::new(&more));
+        let brute = BruteForce::new(&tris);
+        let (mut blocked, mut total) = (0, 0);
+        for _ in 0..20_000 {
+            let (x0, z0, x1, z1) = (
+                rng.next() * 2.0,
+                rng.next() * 2.0,
+                rng.next() * 2.0,
+                rng.next() * 2.0,
+            );
+            // In the floor's plane, and a hair above it.
+            for y in [0.1f32, 0.1 + 1e-7] {
+                let (p, q) = (turn * Vec3::new(x0, y, z0), turn * Vec3::new(x1, y, z1));
+                let clear = a.segment_clear(p, q);
+                assert_eq!(clear, b.segment_clear(p, q), "{p} {q}");
+                assert_eq!(clear, brute.segment_clear(p, q), "{p} {q}");
+                blocked += usize::from(!clear);
+                total += 1;
+            }
+        }
+        // The walls block; the floor, edge-on, does not.
+        assert!(blocked > 1000 && blocked < total, "{blocked} of {total}");
     }
 
     #[test]
