@@ -45,6 +45,22 @@ pub fn element_emission(mesh: &Mesh, surfaces: &[radiant_scene::Surface]) -> Vec
         .collect()
 }
 
+/// The field of a clustered bake's light: each element votes by its exposed share
+/// ([`crate::exposure::fraction`] of its probes that escaped, `exposure`).
+pub fn exposed_field(
+    mesh: &Mesh,
+    surfaces: &[radiant_scene::Surface],
+    rho: &[Rgb],
+    exposure: &[u8],
+    radiosity: &[Rgb],
+) -> SmoothField {
+    let emission = element_emission(mesh, surfaces);
+    let weight: Vec<f64> = (exposure.iter())
+        .map(|&l| crate::exposure::fraction(l))
+        .collect();
+    SmoothField::from_parts(mesh, rho, &emission, Some(&weight), radiosity)
+}
+
 /// Cosine between normals that still share a vertex value.
 const SAME_PLANE: f64 = 0.906; // 25°
 

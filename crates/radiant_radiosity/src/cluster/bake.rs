@@ -26,7 +26,7 @@ use crate::metrics::surface_means_exposed;
 use crate::params::BakeParams;
 use crate::report::{BakeReport, BakeResult, PhaseTimes, TimelinePoint};
 use crate::rng::Fnv;
-use crate::smooth::{SmoothField, element_emission};
+use crate::smooth::SmoothField;
 use crate::solve::{Info, SolveError};
 use crate::solvers::SolverKind;
 use crate::system::{Rgb, System};
@@ -490,17 +490,8 @@ impl ClusterBake {
     /// The current light as a smooth field (for light maps): each element votes by its exposed
     /// area, enclosed elements not at all.
     pub fn smooth_field(&self) -> SmoothField {
-        let emission = element_emission(&self.mesh, &self.surfaces);
-        let weight: Vec<f64> = (self.sys.exposure().iter())
-            .map(|&l| crate::exposure::fraction(l))
-            .collect();
-        SmoothField::from_parts(
-            &self.mesh,
-            &self.sys.rho,
-            &emission,
-            Some(&weight),
-            &self.radiosity(),
-        )
+        let (rho, live) = (&self.sys.rho, self.sys.exposure());
+        crate::smooth::exposed_field(&self.mesh, &self.surfaces, rho, live, &self.radiosity())
     }
 
     /// The bake as [`Watch::on_sweep`] sees it.

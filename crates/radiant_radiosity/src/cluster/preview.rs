@@ -38,7 +38,7 @@ use rayon::prelude::*;
 use crate::FormFactorParams;
 use crate::hierarchy::RootMatch;
 use crate::mesh::Mesh;
-use crate::smooth::{SmoothField, element_emission};
+use crate::smooth::SmoothField;
 use crate::system::Rgb;
 
 /// The light right after a geometry edit is meshed, before its links are refined (see the
@@ -66,17 +66,8 @@ impl EditPreview {
     /// The preview's light as a smooth field, as [`super::ClusterBake::smooth_field`] makes
     /// the bake's.
     pub fn smooth_field(&self, surfaces: &[Surface]) -> SmoothField {
-        let emission = element_emission(&self.mesh, surfaces);
-        let weight: Vec<f64> = (self.exposure.iter())
-            .map(|&l| crate::exposure::fraction(l))
-            .collect();
-        SmoothField::from_parts(
-            &self.mesh,
-            &self.rho,
-            &emission,
-            Some(&weight),
-            &self.radiosity,
-        )
+        let (rho, live) = (&self.rho, &self.exposure);
+        crate::smooth::exposed_field(&self.mesh, surfaces, rho, live, &self.radiosity)
     }
 }
 
