@@ -2,14 +2,23 @@
 emitting ceiling panel and a k x k grid of boxes on the floor (reflectance 0.5), each box face
 split into 4^split triangles. Input triangles: 12 + 2 + 12 k^2 4^split.
 
-The same room as `radiant_radiosity::scenes::room_with_boxes`, for the CLI, so that a scaling
-run is measured as a user would run it:
+With --grow the room grows with its boxes instead: every cell is 2.5 m (the 20 m room's at
+k = 8), the room is 2.5 k m square, and the ceiling has one panel per tile of about 20 m
+(n x n panels), so the boxes, their triangles and the light per square metre stay as they
+are while the level gets larger. Bake such a room with `--patch-size 5`, the 20 m room's
+default patch size (a quarter of its extent), so that its elements stay as they are too.
+Input triangles: 12 + 2 n^2 + 12 k^2 4^split with n = max(1, (k + 4) // 8).
+
+The same rooms as `radiant_radiosity::scenes::room_with_boxes` and `grown_room_with_boxes`,
+for the CLI, so that a scaling run is measured as a user would run it:
 
   python3 tools/make_rooms.py 72 2 /tmp/rooms/room_1m.gltf      # 995 342 triangles
   ulimit -v 16000000; /usr/bin/time -v target/release/radiant bake /tmp/rooms/room_1m.gltf --out /tmp/r1m
 
   python3 tools/make_rooms.py --table /tmp/rooms                # the four rooms of the table:
                                                                 # about 1 k, 10 k, 100 k, 1 M
+  python3 tools/make_rooms.py --table /tmp/rooms --grow         # the same boxes, rooms that grow
+  target/release/radiant bake /tmp/rooms/room_grow_k72_s2.gltf --patch-size 5 --out /tmp/g1m
 
 Standard library only. Positions are float32 in one .bin beside the .gltf.
 """
@@ -20,6 +29,8 @@ import sys
 from pathlib import Path
 
 W, H = 20.0, 4.0
+# A cell of the grown rooms: the 20 m room's at k = 8.
+GROW_CELL = W / 8
 TABLE = [(5, 1), (8, 2), (23, 2), (72, 2)]
 
 
@@ -48,13 +59,20 @@ def split(tris, levels):
     return tris
 
 
-def room(k, levels):
-    parts = {"room": box((0, 0, 0), (W, H, W), True)}
-    x0, x1, y = W * 0.4, W * 0.6, H - 1e-3
-    # The panel faces down.
-    p = [(x0, y, x0), (x1, y, x0), (x1, y, x1), (x0, y, x1)]
-    parts["light"] = [[p[0], p[1], p[2]], [p[0], p[2], p[3]]]
-    cell = W / max(k, 1)
+def room(k, levels, grow=False):
+    width = GROW_CELL * max(k, 1) if grow else W
+    panels = max(1, (k + 4) // 8) if grow else 1
+    parts = {"room": box((0, 0, 0), (width, H, width), True)}
+    tile, y = width / panels, H - 1e-3
+    parts["light"] = []
+    for a in range(panels):
+        for b in range(panels):
+            x0, x1 = (a + 0.4) * tile, (a + 0.6) * tile
+            z0, z1 = (b + 0.4) * tile, (b + 0.6) * tile
+            # The panel faces down.
+            p = [(x0, y, z0), (x1, y, z0), (x1, y, z1), (x0, y, z1)]
+            parts["light"] += [[p[0], p[1], p[2]], [p[0], p[2], p[3]]]
+    cell = width / max(k, 1)
     boxes = []
     for i in range(k):
         for j in range(k):
@@ -107,10 +125,13 @@ def main():
     ap.add_argument("split", nargs="?", type=int, help="levels of 4-way splitting of each box face")
     ap.add_argument("out", nargs="?", help="output .gltf")
     ap.add_argument("--table", metavar="DIR", help="write the table's rooms into DIR")
+    ap.add_argument("--grow", action="store_true",
+                    help="rooms grow with their boxes (2.5 m cells, a panel per 20 m tile)")
     a = ap.parse_args()
     jobs = []
+    stem = "room_grow" if a.grow else "room"
     if a.table:
-        jobs = [(k, s, Path(a.table) / f"room_k{k}_s{s}.gltf") for k, s in TABLE]
+        jobs = [(k, s, Path(a.table) / f"{stem}_k{k}_s{s}.gltf") for k, s in TABLE]
     elif a.k is not None and a.split is not None and a.out:
         jobs = [(a.k, a.split, Path(a.out))]
     else:
@@ -118,7 +139,7 @@ def main():
     for k, s, out in jobs:
         if k < 0 or s < 0 or s > 6:
             sys.exit(f"k {k} and split {s}: k >= 0, 0 <= split <= 6")
-        n = write(room(k, s), out)
+        n = write(room(k, s, a.grow), out)
         print(f"{out}: {n} triangles")
 
 

@@ -120,9 +120,24 @@ pub fn tessellated(scene: &Scene, levels: u32) -> Scene {
 /// A room for scaling runs: a closed 20 × 4 × 20 box (reflectance 0.6) with an emitting
 /// ceiling panel and a `k × k` grid of boxes on the floor (reflectance 0.5), each box's
 /// faces split into `4^split` triangles. Input triangles: `12 + 2 + 12 k² 4^split`.
+/// `tools/make_rooms.py` writes the same room as glTF.
 pub fn room_with_boxes(k: u32, split: u32) -> Scene {
+    room(k, split, 20.0, 1)
+}
+
+/// A room that grows with its boxes, as a level grows at a fixed level of detail: every cell
+/// is 2.5 m (the cell of [`room_with_boxes`] at `k = 8`), the room is `2.5 k` m square, and the
+/// ceiling has one panel for each tile of about 20 m (`n = max(1, (k + 4) / 8)` panels a
+/// side), so boxes, triangles and light per square metre stay as they are. Input triangles:
+/// `12 + 2 n² + 12 k² 4^split`. `tools/make_rooms.py --grow` writes the same room as glTF.
+pub fn grown_room_with_boxes(k: u32, split: u32) -> Scene {
+    let panels = (k.saturating_add(4) / 8).max(1);
+    room(k, split, 2.5 * f64::from(k.max(1)), panels)
+}
+
+fn room(k: u32, split: u32, w: f64, panels: u32) -> Scene {
     let mut s = Scene::default();
-    let (w, h) = (20.0, 4.0);
+    let h = 4.0;
     add_surface(
         &mut s,
         "room",
@@ -130,12 +145,22 @@ pub fn room_with_boxes(k: u32, split: u32) -> Scene {
         [0.0; 3],
         &box_triangles(DVec3::ZERO, DVec3::new(w, h, w), true),
     );
-    let panel = quad(
-        DVec3::new(w * 0.4, h - 1e-3, w * 0.4),
-        DVec3::new(w * 0.2, 0.0, 0.0),
-        DVec3::new(0.0, 0.0, w * 0.2),
-    );
-    add_surface(&mut s, "light", [0.0; 3], [5.0; 3], &panel);
+    let tile = w / f64::from(panels);
+    let mut light = Vec::new();
+    for a in 0..panels {
+        for b in 0..panels {
+            light.extend(quad(
+                DVec3::new(
+                    (f64::from(a) + 0.4) * tile,
+                    h - 1e-3,
+                    (f64::from(b) + 0.4) * tile,
+                ),
+                DVec3::new(tile * 0.2, 0.0, 0.0),
+                DVec3::new(0.0, 0.0, tile * 0.2),
+            ));
+        }
+    }
+    add_surface(&mut s, "light", [0.0; 3], [5.0; 3], &light);
     let mut boxes = Scene::default();
     let cell = w / f64::from(k.max(1));
     for i in 0..k {
