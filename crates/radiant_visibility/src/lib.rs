@@ -141,6 +141,15 @@ fn positive_zeros(d: Vec3) -> Vec3A {
     Vec3A::from(d) + Vec3A::ZERO
 }
 
+/// How far behind its origin (in units of its direction) a [`Visibility::closest_hit`] ray
+/// starts its traversal. obvhs 0.4's wide-BVH node test clamps each child box's entry to
+/// `t = 1e-4`, whatever the ray's own `tmin`: a box wholly nearer than that is skipped, and with
+/// it a triangle the ray meets. A light panel 1 mm under a ceiling, alone in its box, was missed
+/// by 60 % of the rays cast from the ceiling behind it (the path tracer then saw the floor
+/// through it); started this far back, every box in front of the origin lies past the clamp.
+/// Segments need nothing: they ignore [`SEGMENT_EPSILON`] = 1e-4 at their start anyway.
+const TRAVERSAL_BACK: f32 = 2e-4;
+
 fn ray_tmin(dir: Vec3) -> f32 {
     // A tiny offset relative to the direction's length.
     1e-6 / dir.length().max(f32::MIN_POSITIVE) * 1e-1
@@ -302,16 +311,20 @@ impl Bvh {
         }
         let gone = |id: usize| removed.is_some_and(|r| r.get(self.ids[id] as usize) == Some(&true));
         let (o, d) = (Vec3A::from(origin), positive_zeros(dir));
-        let ray = Ray::new(o, d, ray_tmin(dir), tmax);
+        let tmin = ray_tmin(dir);
+        // The traversal starts `TRAVERSAL_BACK` behind the origin (see there); the triangles
+        // are tested from the origin itself, and the traversal is handed their distances from
+        // its own start.
+        let ray = Ray::new(o - d * TRAVERSAL_BACK, d, tmin, tmax + TRAVERSAL_BACK);
         let mut hit = obvhs::ray::RayHit::none();
         let mut best: Option<(f32, f32, f32, bool, usize)> = None;
         self.bvh.ray_traverse(ray, &mut hit, |r, id| {
-            match self.tris[id].intersect(r.origin, r.direction, r.tmin, r.tmax) {
+            match self.tris[id].intersect(o, d, tmin, r.tmax - TRAVERSAL_BACK) {
                 Some((t, u, v, front)) if !gone(id) && self.counts(id, u, v) => {
                     if best.is_none_or(|b| t < b.0) {
                         best = Some((t, u, v, front, id));
                     }
-                    t
+                    t + TRAVERSAL_BACK
                 }
                 _ => f32::INFINITY,
             }
@@ -433,6 +446,55 @@ mod tests {
             }
         }
         assert!(hits > 1000, "the test must exercise hits ({hits})");
+    }
+
+    #[test]
+    fn a_triangle_just_in_front_of_the_origin_is_hit() {
+        // A 0.4-wide panel 5e-5 under a 2-wide ceiling, above floors of 0 to 4 096 tiles: the
+        // panel's box lies wholly within t = 1e-4 of rays cast down from the ceiling above it.
+        // Before the traversal started behind the origin, such rays could miss the panel and
+        // meet the floor, depending on how the BVH grouped it (60 % of them in a room of boxes).
+        let quad = |y: f32, x0: f32, z0: f32, w: f32| -> [[Vec3; 3]; 2] {
+            let p = [
+                Vec3::new(x0, y, z0),
+                Vec3::new(x0 + w, y, z0),
+                Vec3::new(x0 + w, y, z0 + w),
+                Vec3::new(x0, y, z0 + w),
+            ];
+            [[p[0], p[1], p[2]], [p[0], p[2], p[3]]]
+        };
+        let mut rng = Rng(0x2545_F491_4F6C_DD1D);
+        for tiles in [0usize, 4, 16, 64] {
+            let mut tris: Vec<[Vec3; 3]> = Vec::new();
+            tris.extend(quad(1.0, -1.0, -1.0, 2.0));
+            let panel = tris.len() as u32;
+            tris.extend(quad(1.0 - 5e-5, -0.2, -0.2, 0.4));
+            let w = 2.0 / tiles.max(1) as f32;
+            for i in 0..tiles {
+                for j in 0..tiles {
+                    let (x, z) = (-1.0 + i as f32 * w, -1.0 + j as f32 * w);
+                    tris.extend(quad(0.0, x, z, w));
+                }
+            }
+            let (bvh, brute) = (Bvh::new(&tris), BruteForce::new(&tris));
+            for _ in 0..2000 {
+                let o = Vec3::new(
+                    rng.next() * 0.36 - 0.18,
+                    1.0 - 1e-6,
+                    rng.next() * 0.36 - 0.18,
+                );
+                let d = Vec3::new(rng.next() - 0.5, -1.0, rng.next() - 0.5).normalize();
+                let b = brute.closest_hit(o, d, f32::INFINITY).expect("a hit");
+                assert!(b.triangle >= panel && b.triangle < panel + 2, "{b:?}");
+                let a = bvh.closest_hit(o, d, f32::INFINITY);
+                assert_eq!(
+                    a.map(|a| (a.triangle, a.front)),
+                    Some((b.triangle, b.front)),
+                    "{tiles}² tiles, ray {o} {d}"
+                );
+                assert!((a.map_or(0.0, |a| a.t) - b.t).abs() <= 1e-7);
+            }
+        }
     }
 
     #[test]
