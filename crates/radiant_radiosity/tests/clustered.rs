@@ -100,29 +100,34 @@ fn a_finely_tessellated_box_bakes_like_the_plain_one() {
     );
 }
 
+/// Bakes a room of boxes with the default cluster parameters and prints its counts: its
+/// elements, links per element and counted bytes.
+fn room_counts(what: &str, scene: &Scene, p: &BakeParams) -> (usize, f64, u64) {
+    let r = bake(scene, p, &ClusterParams::default());
+    let lpe = r.report.links as f64 / r.report.elements as f64;
+    let bytes = report(&r).memory_estimate;
+    eprintln!(
+        "{what}: {} triangles, {} elements, {} links, {lpe:.1} per element, {} MiB counted",
+        scene.triangles.len(),
+        r.report.elements,
+        r.report.links,
+        bytes >> 20
+    );
+    (r.report.elements, lpe, bytes)
+}
+
 #[test]
 fn links_grow_linearly_across_rooms() {
-    // Rooms of 2², 4², 8² and 16² boxes: 5 k to 100 k input triangles. Links per element stay
+    // Rooms of 4², 8² and 16² boxes: 3 k to 49 k input triangles. Links per element stay
     // within a band (the N^1.5 growth of the per-triangle hierarchy would double them from one
     // room to the next).
     let mut p = BakeParams::default();
     p.mesh.patch_size = 2.0;
     p.mesh.element_levels = 0;
-    let cp = ClusterParams::default();
-    let mut per_element = Vec::new();
-    for (k, split) in [(4u32, 2u32), (8, 2), (16, 2)] {
-        let scene = room_with_boxes(k, split);
-        let r = bake(&scene, &p, &cp);
-        let lpe = r.report.links as f64 / r.report.elements as f64;
-        eprintln!(
-            "room {k}x{k}: {} triangles, {} elements, {} links, {lpe:.1} per element, {} MiB counted",
-            scene.triangles.len(),
-            r.report.elements,
-            r.report.links,
-            report(&r).memory_estimate >> 20
-        );
-        per_element.push((r.report.elements, lpe, report(&r).memory_estimate));
-    }
+    let per_element: Vec<(usize, f64, u64)> = [(4u32, 2u32), (8, 2), (16, 2)]
+        .into_iter()
+        .map(|(k, split)| room_counts(&format!("room {k}x{k}"), &room_with_boxes(k, split), &p))
+        .collect();
     let (lo, hi) = per_element
         .iter()
         .fold((f64::MAX, 0.0f64), |(lo, hi), &(_, l, _)| {
@@ -157,20 +162,13 @@ fn links_per_element_stay_flat_as_a_level_grows() {
     let mut p = BakeParams::default();
     p.mesh.patch_size = 2.0;
     p.mesh.element_levels = 0;
-    let cp = ClusterParams::default();
-    let mut per_element = Vec::new();
-    for (k, split) in [(8u32, 1u32), (16, 1), (32, 1)] {
-        let scene = grown_room_with_boxes(k, split);
-        let r = bake(&scene, &p, &cp);
-        let lpe = r.report.links as f64 / r.report.elements as f64;
-        eprintln!(
-            "grown room {k}x{k}: {} triangles, {} elements, {} links, {lpe:.1} per element",
-            scene.triangles.len(),
-            r.report.elements,
-            r.report.links,
-        );
-        per_element.push(lpe);
-    }
+    let per_element: Vec<f64> = [(8u32, 1u32), (16, 1), (32, 1)]
+        .into_iter()
+        .map(|(k, split)| {
+            let scene = grown_room_with_boxes(k, split);
+            room_counts(&format!("grown room {k}x{k}"), &scene, &p).1
+        })
+        .collect();
     let lo = per_element.iter().copied().fold(f64::MAX, f64::min);
     let hi = per_element.iter().copied().fold(0.0, f64::max);
     assert!(
