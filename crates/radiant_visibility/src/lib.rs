@@ -20,8 +20,11 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use glam::{Vec3, Vec3A};
+use glam::{DVec3, Vec3, Vec3A};
 use obvhs::{BvhBuildParams, cwbvh::CwBvh, ray::Ray};
+
+mod shaft;
+pub use shaft::{Ends, Shaft};
 
 /// Fraction of a segment's length cut from each end, so that the surfaces at its end points do
 /// not block it.
@@ -46,9 +49,35 @@ pub struct Hit {
 pub trait Visibility: Send + Sync {
     /// Whether the segment from `a` to `b` is unblocked, ignoring [`SEGMENT_EPSILON`] at each end.
     fn segment_clear(&self, a: Vec3, b: Vec3) -> bool;
+    /// [`Visibility::segment_clear`] for a segment between two triangles, leaving out the
+    /// triangles that lie on or behind either one's plane ([`Ends`]): the segment can meet them
+    /// only by rounding, grazing that plane. [`Visibility::shaft_clear`] leaves them out too,
+    /// so that where a shaft is clear its segments are, whether asked or not. This default
+    /// leaves nothing out.
+    fn segment_clear_between(&self, a: Vec3, b: Vec3, ends: &Ends) -> bool {
+        let _ = ends;
+        self.segment_clear(a, b)
+    }
     /// The closest hit of the ray `origin + t * dir` for `t` in `(tmin, tmax]`, tmin a tiny
     /// relative offset.
     fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit>;
+    /// Whether no triangle at all lies in the shaft of the segments from triangle `a`, leaving
+    /// it along `na`, to triangle `b`, reaching it against `nb` ([`Shaft`]): then every such
+    /// segment is clear ([`Visibility::segment_clear_between`]), and so is every segment
+    /// between parts of the two. Conservative: `false` when unsure, and always in this
+    /// default. `witness` names a triangle that may lie in it (`u32::MAX`: none known), tried
+    /// first; a shaft found not clear names one there, for the shafts of the parts after it.
+    fn shaft_clear(
+        &self,
+        a: &[DVec3; 3],
+        na: DVec3,
+        b: &[DVec3; 3],
+        nb: DVec3,
+        witness: &mut u32,
+    ) -> bool {
+        let _ = (a, na, b, nb, witness);
+        false
+    }
 }
 
 /// Decides whether a hit counts. Alpha masks implement it: a ray passes a masked triangle
@@ -89,6 +118,26 @@ impl Tri {
             e1: Vec3A::from(t[1]) - v0,
             e2: Vec3A::from(t[2]) - v0,
         }
+    }
+
+    /// Its vertices, in `f64`.
+    fn vertices(&self) -> [DVec3; 3] {
+        let v0 = DVec3::from(Vec3::from(self.v0));
+        [
+            v0,
+            v0 + DVec3::from(Vec3::from(self.e1)),
+            v0 + DVec3::from(Vec3::from(self.e2)),
+        ]
+    }
+
+    /// How far past its edges [`Tri::intersect`] may count a hit (its box's [`BOX_SLACK`]).
+    fn slack(&self) -> f64 {
+        let ext = self
+            .e1
+            .abs()
+            .max(self.e2.abs())
+            .max((self.e1 - self.e2).abs());
+        f64::from(ext.max_element() * BOX_SLACK.0 + BOX_SLACK.1)
     }
 
     /// Möller–Trumbore, two-sided. Returns (t, u, v, front) for `t` in `[tmin, tmax]`.
@@ -176,6 +225,15 @@ impl Visibility for BruteForce {
         !self.tris.iter().any(|t| {
             t.intersect(o, d, SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON)
                 .is_some()
+        })
+    }
+
+    fn segment_clear_between(&self, a: Vec3, b: Vec3, ends: &Ends) -> bool {
+        let (o, d) = (Vec3A::from(a), Vec3A::from(b - a));
+        !self.tris.iter().any(|t| {
+            t.intersect(o, d, SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON)
+                .is_some()
+                && !ends.leave_out(&t.vertices())
         })
     }
 
@@ -283,11 +341,20 @@ impl Bvh {
 impl Bvh {
     /// [`Visibility::segment_clear`], where the triangles `removed` marks (by the caller's
     /// index) are not there.
-    fn segment_clear_without(&self, a: Vec3, b: Vec3, removed: Option<&[bool]>) -> bool {
+    fn segment_clear_without(
+        &self,
+        a: Vec3,
+        b: Vec3,
+        removed: Option<&[bool]>,
+        ends: Option<&Ends>,
+    ) -> bool {
         if self.tris.is_empty() {
             return true;
         }
-        let gone = |id: usize| removed.is_some_and(|r| r.get(self.ids[id] as usize) == Some(&true));
+        let gone = |id: usize| {
+            removed.is_some_and(|r| r.get(self.ids[id] as usize) == Some(&true))
+                || ends.is_some_and(|e| e.leave_out(&self.tris[id].vertices()))
+        };
         let (o, d) = (Vec3A::from(a), positive_zeros(b - a));
         let ray = Ray::new(o, d, SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON);
         self.bvh.ray_traverse_miss(ray, |r, id| {
@@ -341,7 +408,65 @@ impl Bvh {
 
 impl Visibility for Bvh {
     fn segment_clear(&self, a: Vec3, b: Vec3) -> bool {
-        self.segment_clear_without(a, b, None)
+        self.segment_clear_without(a, b, None, None)
+    }
+
+    fn segment_clear_between(&self, a: Vec3, b: Vec3, ends: &Ends) -> bool {
+        self.segment_clear_without(a, b, None, Some(ends))
+    }
+
+    fn shaft_clear(
+        &self,
+        a: &[DVec3; 3],
+        na: DVec3,
+        b: &[DVec3; 3],
+        nb: DVec3,
+        witness: &mut u32,
+    ) -> bool {
+        if self.tris.is_empty() {
+            return true;
+        }
+        let Some(shaft) = Shaft::new(a, na, b, nb) else {
+            return false;
+        };
+        let meets = |id: u32| {
+            (self.tris.get(id as usize))
+                .is_none_or(|t| !shaft.misses_triangle(&t.vertices(), t.slack()))
+        };
+        // What blocked the shaft holding this one mostly blocks this one too.
+        if *witness != u32::MAX && meets(*witness) {
+            return false;
+        }
+        // Depth first through the wide BVH: every child box the shaft may meet, and in the
+        // leaves every triangle; the first triangle that may block answers.
+        let nodes = &self.bvh.nodes;
+        let mut stack = vec![0u32];
+        while let Some(i) = stack.pop() {
+            let Some(node) = nodes.get(i as usize) else {
+                return false;
+            };
+            for child in 0..8 {
+                if node.is_child_empty(child) {
+                    continue;
+                }
+                let bx = node.child_aabb(child);
+                if shaft.misses_box(bx.min, bx.max) {
+                    continue;
+                }
+                if !node.is_leaf(child) {
+                    stack.push(node.child_node_index(child));
+                    continue;
+                }
+                let (first, count) = node.child_primitives(child);
+                for id in first..first + count {
+                    if meets(id) {
+                        *witness = id;
+                        return false;
+                    }
+                }
+            }
+        }
+        true
     }
 
     fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit> {
@@ -373,7 +498,13 @@ impl<'a> Patched<'a> {
 
 impl Visibility for Patched<'_> {
     fn segment_clear(&self, a: Vec3, b: Vec3) -> bool {
-        self.added.segment_clear(a, b) && self.base.segment_clear_without(a, b, Some(&self.removed))
+        self.added.segment_clear(a, b)
+            && (self.base).segment_clear_without(a, b, Some(&self.removed), None)
+    }
+
+    fn segment_clear_between(&self, a: Vec3, b: Vec3, ends: &Ends) -> bool {
+        self.added.segment_clear_between(a, b, ends)
+            && (self.base).segment_clear_without(a, b, Some(&self.removed), Some(ends))
     }
 
     fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit> {
@@ -446,6 +577,90 @@ mod tests {
             }
         }
         assert!(hits > 1000, "the test must exercise hits ({hits})");
+    }
+
+    #[test]
+    fn a_clear_shaft_has_no_blocked_segment() {
+        // Random pairs among a soup's triangles (as the radiosity asks: both are in the BVH),
+        // each seen from its front towards the other. Wherever the shaft is called clear,
+        // every segment that counts (leaving `a` along `na`, reaching `b` against `nb`) must be
+        // clear by brute force; and some shafts must be clear, some not.
+        let mut rng = Rng(0x2545_F491_4F6C_DD1D);
+        let tris = soup(&mut rng, 60);
+        let (bvh, brute) = (Bvh::new(&tris), BruteForce::new(&tris));
+        let d = |t: &[Vec3; 3]| t.map(DVec3::from);
+        let (mut clear, mut blocked, mut segments) = (0, 0, 0);
+        let mut witness = u32::MAX;
+        for _ in 0..3000 {
+            let i = (rng.next() * tris.len() as f32) as usize % tris.len();
+            let j = (rng.next() * tris.len() as f32) as usize % tris.len();
+            if i == j {
+                continue;
+            }
+            let (a, b) = (d(&tris[i]), d(&tris[j]));
+            let c = |t: &[DVec3; 3]| (t[0] + t[1] + t[2]) / 3.0;
+            let n = |t: &[DVec3; 3], towards: DVec3| {
+                let n = (t[1] - t[0]).cross(t[2] - t[0]).normalize();
+                if n.dot(towards - c(t)) >= 0.0 { n } else { -n }
+            };
+            let (na, nb) = (n(&a, c(&b)), n(&b, c(&a)));
+            // The witness carries over from pair to pair: a hint, right or wrong.
+            if !bvh.shaft_clear(&a, na, &b, nb, &mut witness) {
+                blocked += 1;
+                continue;
+            }
+            clear += 1;
+            let point = |t: &[DVec3; 3], rng: &mut Rng| {
+                let (mut u, mut v) = (f64::from(rng.next()), f64::from(rng.next()));
+                if u + v > 1.0 {
+                    (u, v) = (1.0 - u, 1.0 - v);
+                }
+                t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v
+            };
+            for _ in 0..200 {
+                let (x, p) = (point(&a, &mut rng), point(&b, &mut rng));
+                // Not grazing either end's plane (see `Shaft`): a segment within a few
+                // degrees of it may meet its own end triangle by rounding.
+                let dir = (p - x).normalize();
+                if na.dot(dir) <= 0.05 || nb.dot(dir) >= -0.05 {
+                    continue;
+                }
+                segments += 1;
+                assert!(
+                    brute.segment_clear(x.as_vec3(), p.as_vec3()),
+                    "a clear shaft {i} -> {j} holds a blocked segment {x} -> {p}"
+                );
+            }
+        }
+        assert!(
+            clear > 100 && blocked > 100,
+            "{clear} clear, {blocked} blocked"
+        );
+        assert!(segments > 10_000, "{segments}");
+        // Two facing walls of an empty room are clear; a wall between them is not.
+        let wall = |x: f32| {
+            [
+                Vec3::new(x, 0.0, 0.0),
+                Vec3::new(x, 1.0, 0.0),
+                Vec3::new(x, 0.0, 1.0),
+            ]
+        };
+        let (l, r) = (wall(0.0), wall(1.0));
+        let room = Bvh::new(&[l, r]);
+        let (walls, facing) = ((d(&l), DVec3::X), (d(&r), DVec3::NEG_X));
+        let clear = |vis: &dyn Visibility, witness: &mut u32| {
+            vis.shaft_clear(&walls.0, walls.1, &facing.0, facing.1, witness)
+        };
+        assert!(clear(&room, &mut u32::MAX.clone()));
+        // Parted by a third wall, which it names as the witness.
+        let parted = Bvh::new(&[l, r, wall(0.5)]);
+        let mut w = u32::MAX;
+        assert!(!clear(&parted, &mut w));
+        assert_eq!(parted.ids[w as usize], 2);
+        // A wrong witness does not make a clear shaft blocked.
+        assert!(clear(&room, &mut 0));
+        // The default (brute force) never says clear.
+        assert!(!clear(&BruteForce::new(&[l, r]), &mut u32::MAX.clone()));
     }
 
     #[test]

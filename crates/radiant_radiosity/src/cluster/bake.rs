@@ -1170,3 +1170,104 @@ fn refine_within_budget(
         limit: budget.limit,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{DVec3, Vec3};
+    use radiant_visibility::{Ends, Hit};
+    use std::sync::atomic::AtomicU64;
+
+    /// The BVH, counting the segments cast and the shafts found clear; with `shafts` off it
+    /// keeps its shaft test to itself, so that every link casts its rays.
+    struct Counted<'a> {
+        bvh: &'a Bvh,
+        shafts: bool,
+        segments: AtomicU64,
+        clear: AtomicU64,
+    }
+
+    impl Visibility for Counted<'_> {
+        fn segment_clear(&self, a: Vec3, b: Vec3) -> bool {
+            self.segments.fetch_add(1, Ordering::Relaxed);
+            self.bvh.segment_clear(a, b)
+        }
+        fn segment_clear_between(&self, a: Vec3, b: Vec3, ends: &Ends) -> bool {
+            self.segments.fetch_add(1, Ordering::Relaxed);
+            self.bvh.segment_clear_between(a, b, ends)
+        }
+        fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit> {
+            self.bvh.closest_hit(origin, dir, tmax)
+        }
+        fn shaft_clear(
+            &self,
+            a: &[DVec3; 3],
+            na: DVec3,
+            b: &[DVec3; 3],
+            nb: DVec3,
+            witness: &mut u32,
+        ) -> bool {
+            let clear = self.shafts && self.bvh.shaft_clear(a, na, b, nb, witness);
+            self.clear.fetch_add(u64::from(clear), Ordering::Relaxed);
+            clear
+        }
+    }
+
+    #[test]
+    fn links_below_a_clear_shaft_are_the_links_their_rays_give() {
+        // The Cornell box: the links refined with shafts (no rays below a clear one) and with
+        // every ray cast are the same, form factors bit for bit, and the shafts spared rays.
+        let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+        let params = BakeParams::default();
+        let mesh = Mesh::adaptive(&scene, &params.mesh, &mut |_| Ok(())).expect("meshes");
+        let bvh = input::visibility(&mesh, None);
+        let tree = Tree::new(&mesh);
+        let (rho, source) =
+            Lighting::new(&scene, &mesh, &bvh, None, &params.ff).terms(&scene.surfaces, &mesh);
+        let oracle = Oracle::new(&mesh, &tree, &rho, &source);
+        let links = |vis: &Counted| {
+            let r = super::super::refine::Refiner {
+                mesh: &mesh,
+                tree: &tree,
+                vis,
+                bhat: &oracle.bhat,
+                rho: &oracle.rmax,
+                eps: 0.03,
+                kind: params.form_factors,
+                samples: ClusterParams::default().samples,
+                seed: params.ff.seed,
+                max_links: u64::MAX,
+                stop: None,
+                before: None,
+                keep: false,
+                replay: None,
+            };
+            let (record, _) = r.build(&|_, _| {}).expect("refines");
+            record.links
+        };
+        let counted = |shafts| Counted {
+            bvh: &bvh,
+            shafts,
+            segments: AtomicU64::new(0),
+            clear: AtomicU64::new(0),
+        };
+        let (with, without) = (counted(true), counted(false));
+        let (a, b) = (links(&with), links(&without));
+        assert_eq!(a.len(), b.len());
+        for (x, y) in a.iter().zip(&b) {
+            assert_eq!((x.recv, x.src), (y.recv, y.src));
+            assert_eq!(x.ff.to_bits(), y.ff.to_bits(), "{x:?} against {y:?}");
+        }
+        let (cast, all) = (
+            with.segments.load(Ordering::Relaxed),
+            without.segments.load(Ordering::Relaxed),
+        );
+        eprintln!(
+            "{} links; {cast} segments cast with shafts ({} clear), {all} without",
+            a.len(),
+            with.clear.load(Ordering::Relaxed)
+        );
+        assert!(with.clear.load(Ordering::Relaxed) > 100);
+        assert!(cast * 10 < all * 9, "{cast} of {all}");
+    }
+}
