@@ -78,7 +78,8 @@ pub struct Shaft {
 
 impl Shaft {
     /// The shaft of the segments from triangle `a` (leaving along `na`) to triangle `b`
-    /// (reached against `nb`); `None` when an input is not finite.
+    /// (reached against `nb`), without its sides yet ([`Shaft::add_sides`]); `None` when an
+    /// input is not finite.
     pub fn new(a: &[DVec3; 3], na: DVec3, b: &[DVec3; 3], nb: DVec3) -> Option<Shaft> {
         let pts = [a[0], a[1], a[2], b[0], b[1], b[2]];
         if !pts.iter().all(|p| p.is_finite()) || !na.is_finite() || !nb.is_finite() {
@@ -106,8 +107,17 @@ impl Shaft {
                 s.push(n, o, -tol);
             }
         }
-        // The hull's side faces.
-        for (x, y) in [(a, b), (b, a)] {
+        Some(s)
+    }
+
+    /// Adds the hull's side faces: the planes through an edge of one triangle and a vertex of
+    /// the other that have all six vertices on one side. Until then the shaft is its box and
+    /// the two triangles' planes alone, a looser shaft that is cheaper to make (enough to find
+    /// a witness in it).
+    pub fn add_sides(&mut self) {
+        let ([a0, a1, a2, b0, b1, b2], tol) = (self.pts, self.tol);
+        let (a, b) = ([a0, a1, a2], [b0, b1, b2]);
+        for (x, y) in [(&a, &b), (&b, &a)] {
             for i in 0..3 {
                 let (p, q) = (x[i], x[(i + 1) % 3]);
                 for &c in y {
@@ -116,21 +126,21 @@ impl Shaft {
                         continue;
                     }
                     let o = n.dot(p);
-                    let (mn, mx) = pts
-                        .iter()
-                        .fold((f64::INFINITY, f64::NEG_INFINITY), |m, &v| {
-                            let d = n.dot(v) - o;
-                            (m.0.min(d), m.1.max(d))
-                        });
+                    let (mn, mx) =
+                        (self.pts)
+                            .iter()
+                            .fold((f64::INFINITY, f64::NEG_INFINITY), |m, &v| {
+                                let d = n.dot(v) - o;
+                                (m.0.min(d), m.1.max(d))
+                            });
                     if mx <= tol {
-                        s.push(n, o, tol);
+                        self.push(n, o, tol);
                     } else if mn >= -tol {
-                        s.push(-n, -o, tol);
+                        self.push(-n, -o, tol);
                     }
                 }
             }
         }
-        Some(s)
     }
 
     fn push(&mut self, n: DVec3, o: f64, slack: f64) {
@@ -196,7 +206,16 @@ mod tests {
     #[test]
     fn a_shaft_between_facing_triangles_holds_what_lies_between_and_not_beside() {
         let (a, b) = square_pair(1.0);
-        let s = Shaft::new(&a, DVec3::Y, &b, DVec3::NEG_Y).expect("finite");
+        let mut s = Shaft::new(&a, DVec3::Y, &b, DVec3::NEG_Y).expect("finite");
+        let diagonal = [
+            DVec3::new(0.8, 0.5, 0.8),
+            DVec3::new(0.9, 0.5, 0.8),
+            DVec3::new(0.8, 0.5, 0.9),
+        ];
+        // Without its sides the shaft is its box: it holds what lies beyond the diagonal face.
+        assert!(!s.misses_triangle(&diagonal, 0.0));
+        s.add_sides();
+        assert!(s.misses_triangle(&diagonal, 0.0));
         let between = [
             DVec3::new(0.2, 0.5, 0.2),
             DVec3::new(0.3, 0.5, 0.2),
