@@ -316,26 +316,35 @@ fn spectral(
 /// the glTF export when asked for.
 fn write_outputs(args: &BakeArgs, job: &Job, result: &BakeResult) -> anyhow::Result<Written> {
     let out = &args.out;
-    write_atomic(
-        &out.join("surfaces.csv"),
-        output::surfaces_csv(&result.surfaces).as_bytes(),
-    )?;
-    write_atomic(
-        &out.join("patches.csv"),
-        output::patches_csv(&job.scene, result).as_bytes(),
-    )?;
-    let lap = Instant::now();
-    let field = SmoothField::new(
-        &result.mesh,
-        &result.system,
-        &job.scene.surfaces,
-        &result.radiosity,
-    );
-    let map = lightmap::bake_lightmap(&job.scene, &job.atlas, &result.mesh, &field);
-    let lightmap_s = lap.elapsed().as_secs_f64();
-    let lap = Instant::now();
-    output::write_lightmaps(out, &map)?;
-    let write_s = lap.elapsed().as_secs_f64();
+    // The tables are written on a thread of their own while the light map is filled and
+    // encoded: on the Cornell box the outputs took 0.15 s one after the other.
+    let (tables, light) = std::thread::scope(|scope| {
+        let tables = scope.spawn(|| -> anyhow::Result<()> {
+            write_atomic(
+                &out.join("surfaces.csv"),
+                output::surfaces_csv(&result.surfaces).as_bytes(),
+            )?;
+            write_atomic(
+                &out.join("patches.csv"),
+                output::patches_csv(&job.scene, result).as_bytes(),
+            )
+        });
+        let lap = Instant::now();
+        let field = SmoothField::new(
+            &result.mesh,
+            &result.system,
+            &job.scene.surfaces,
+            &result.radiosity,
+        );
+        let map = lightmap::bake_lightmap(&job.scene, &job.atlas, &result.mesh, &field);
+        let lightmap_s = lap.elapsed().as_secs_f64();
+        let lap = Instant::now();
+        let light = output::write_lightmaps(out, &map)
+            .map(|()| (map, lightmap_s, lap.elapsed().as_secs_f64()));
+        (tables.join(), light)
+    });
+    tables.map_err(|_| anyhow::anyhow!("writing surfaces.csv and patches.csv failed"))??;
+    let (map, lightmap_s, write_s) = light?;
     let export = match &args.export {
         Some(path) => export(job, &map, path)?,
         None => serde_json::Value::Null,

@@ -181,40 +181,57 @@ fn finite(x: f64) -> Value {
 /// of several pages is one image of its pages stacked top to bottom (`width × height·pages`).
 pub fn write_lightmaps(dir: &Path, map: &LightMap) -> anyhow::Result<()> {
     let (width, height) = (map.width, map.height * map.pages.max(1));
-    let data: Vec<f32> = map
-        .texels
-        .iter()
-        .flat_map(|t| t.map(|v| if v.is_finite() { v.max(0.0) } else { 0.0 }))
-        .collect();
-    let img = image::Rgb32FImage::from_raw(width, height, data).context("light-map size")?;
-    let mut exr = std::io::Cursor::new(Vec::new());
-    image::DynamicImage::ImageRgb32F(img)
-        .write_to(&mut exr, image::ImageFormat::OpenExr)
-        .context("encoding the EXR light map")?;
-    write_atomic(&dir.join("lightmap.exr"), exr.get_ref())?;
-    let png = preview_png(width, height, &map.texels)?;
-    write_atomic(&dir.join("lightmap.png"), &png)
+    // The two encoders, each on one thread, side by side.
+    let (exr, png) = rayon::join(
+        || -> anyhow::Result<Vec<u8>> {
+            let data: Vec<f32> = map
+                .texels
+                .iter()
+                .flat_map(|t| t.map(|v| if v.is_finite() { v.max(0.0) } else { 0.0 }))
+                .collect();
+            let img =
+                image::Rgb32FImage::from_raw(width, height, data).context("light-map size")?;
+            let mut exr = std::io::Cursor::new(Vec::new());
+            image::DynamicImage::ImageRgb32F(img)
+                .write_to(&mut exr, image::ImageFormat::OpenExr)
+                .context("encoding the EXR light map")?;
+            Ok(exr.into_inner())
+        },
+        || preview_png(width, height, &map.texels),
+    );
+    write_atomic(&dir.join("lightmap.exr"), &exr?)?;
+    write_atomic(&dir.join("lightmap.png"), &png?)
 }
 
 /// A tone-mapped sRGB PNG of linear RGB texels (row-major, top row first): the mean of the lit
 /// texels maps to mid grey, then ACES.
 pub fn preview_png(width: u32, height: u32, texels: &[[f32; 3]]) -> anyhow::Result<Vec<u8>> {
-    let lit: Vec<f64> = texels
-        .iter()
-        .map(|t| radiant::color::luminance(t.map(f64::from)))
-        .filter(|&l| l > 0.0 && l.is_finite())
-        .collect();
-    let mean = if lit.is_empty() {
-        1.0
-    } else {
-        lit.iter().sum::<f64>() / lit.len() as f64
-    };
+    use rayon::prelude::*;
+    // Summed in fixed chunks, then in order: the same bytes whatever the thread count.
+    let (sum, lit) = texels
+        .par_chunks(1 << 14)
+        .map(|c| {
+            c.iter()
+                .map(|t| radiant::color::luminance(t.map(f64::from)))
+                .filter(|&l| l > 0.0 && l.is_finite())
+                .fold((0.0, 0u64), |(s, n), l| (s + l, n + 1))
+        })
+        .collect::<Vec<_>>()
+        .into_iter()
+        .fold((0.0f64, 0u64), |(s, n), (cs, cn)| (s + cs, n + cn));
+    let mean = if lit == 0 { 1.0 } else { sum / lit as f64 };
     let exposure = if mean > 0.0 { 0.18 / mean } else { 1.0 };
     let mut png = image::RgbImage::new(width, height);
-    for (p, t) in png.pixels_mut().zip(texels) {
-        let c = radiant::color::Tonemap::AcesFitted.apply(t.map(|v| f64::from(v) * exposure));
-        *p = image::Rgb(c.map(radiant::color::linear_to_srgb8));
-    }
+    let row = (width as usize * 3).max(1);
+    png.par_chunks_mut(row)
+        .zip(texels.par_chunks(width.max(1) as usize))
+        .for_each(|(out, texels)| {
+            for (p, t) in out.chunks_exact_mut(3).zip(texels) {
+                let c =
+                    radiant::color::Tonemap::AcesFitted.apply(t.map(|v| f64::from(v) * exposure));
+                p.copy_from_slice(&c.map(radiant::color::linear_to_srgb8));
+            }
+        });
     let mut bytes = std::io::Cursor::new(Vec::new());
     png.write_to(&mut bytes, image::ImageFormat::Png)
         .context("encoding a PNG preview")?;
