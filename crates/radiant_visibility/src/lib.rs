@@ -58,6 +58,24 @@ pub trait Visibility: Send + Sync {
         let _ = ends;
         self.segment_clear(a, b)
     }
+    /// [`Visibility::segment_clear_between`] (with `ends`) or [`Visibility::segment_clear`]
+    /// (without), trying first the triangle `blocker` names (this visibility's own number, as
+    /// [`Visibility::shaft_clear`]'s witness; `u32::MAX`: none), which blocked a segment near
+    /// this one; a segment found blocked names its blocker there. The answer is the one
+    /// without the hint: only which triangle is tried first changes. This default ignores it.
+    fn segment_clear_hinted(
+        &self,
+        a: Vec3,
+        b: Vec3,
+        ends: Option<&Ends>,
+        blocker: &mut u32,
+    ) -> bool {
+        let _ = blocker;
+        match ends {
+            Some(e) => self.segment_clear_between(a, b, e),
+            None => self.segment_clear(a, b),
+        }
+    }
     /// The closest hit of the ray `origin + t * dir` for `t` in `(tmin, tmax]`, tmin a tiny
     /// relative offset.
     fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit>;
@@ -93,6 +111,9 @@ impl<F: Fn(u32, f32, f32) -> bool + Send + Sync> HitFilter for F {
         self(triangle, u, v)
     }
 }
+
+/// No blocker to try first ([`Visibility::segment_clear_hinted`]).
+const NO_HINT: u32 = u32::MAX;
 
 /// Rays within this angle (radians) of a triangle's plane do not meet it ([`Tri::edge_on`]).
 const EDGE_ON: f32 = 1e-5;
@@ -339,14 +360,15 @@ impl Bvh {
 }
 
 impl Bvh {
-    /// [`Visibility::segment_clear`], where the triangles `removed` marks (by the caller's
-    /// index) are not there.
+    /// [`Visibility::segment_clear_hinted`], where the triangles `removed` marks (by the
+    /// caller's index) are not there.
     fn segment_clear_without(
         &self,
         a: Vec3,
         b: Vec3,
         removed: Option<&[bool]>,
         ends: Option<&Ends>,
+        blocker: &mut u32,
     ) -> bool {
         if self.tris.is_empty() {
             return true;
@@ -357,12 +379,34 @@ impl Bvh {
         };
         let (o, d) = (Vec3A::from(a), positive_zeros(b - a));
         let ray = Ray::new(o, d, SEGMENT_EPSILON, 1.0 - SEGMENT_EPSILON);
-        self.bvh.ray_traverse_miss(ray, |r, id| {
-            match self.tris[id].intersect(r.origin, r.direction, r.tmin, r.tmax) {
-                Some((t, u, v, _)) if !gone(id) && self.counts(id, u, v) => t,
-                _ => f32::INFINITY,
-            }
-        })
+        // Whether triangle `id` blocks the ray: the traversal's own test, so that the hint
+        // answers as the traversal would.
+        let blocks = |r: &Ray, id: usize| match self.tris[id].intersect(
+            r.origin,
+            r.direction,
+            r.tmin,
+            r.tmax,
+        ) {
+            Some((t, u, v, _)) if !gone(id) && self.counts(id, u, v) => Some(t),
+            _ => None,
+        };
+        if (*blocker as usize) < self.tris.len() && blocks(&ray, *blocker as usize).is_some() {
+            return false;
+        }
+        let mut found = None;
+        let clear = self
+            .bvh
+            .ray_traverse_miss(ray, |r, id| match blocks(r, id) {
+                Some(t) => {
+                    found = Some(id);
+                    t
+                }
+                None => f32::INFINITY,
+            });
+        if let Some(id) = found.filter(|_| !clear) {
+            *blocker = id as u32;
+        }
+        clear
     }
 
     /// [`Visibility::closest_hit`], where the triangles `removed` marks are not there.
@@ -408,11 +452,21 @@ impl Bvh {
 
 impl Visibility for Bvh {
     fn segment_clear(&self, a: Vec3, b: Vec3) -> bool {
-        self.segment_clear_without(a, b, None, None)
+        self.segment_clear_without(a, b, None, None, &mut { NO_HINT })
     }
 
     fn segment_clear_between(&self, a: Vec3, b: Vec3, ends: &Ends) -> bool {
-        self.segment_clear_without(a, b, None, Some(ends))
+        self.segment_clear_without(a, b, None, Some(ends), &mut { NO_HINT })
+    }
+
+    fn segment_clear_hinted(
+        &self,
+        a: Vec3,
+        b: Vec3,
+        ends: Option<&Ends>,
+        blocker: &mut u32,
+    ) -> bool {
+        self.segment_clear_without(a, b, None, ends, blocker)
     }
 
     fn shaft_clear(
@@ -505,12 +559,13 @@ impl<'a> Patched<'a> {
 impl Visibility for Patched<'_> {
     fn segment_clear(&self, a: Vec3, b: Vec3) -> bool {
         self.added.segment_clear(a, b)
-            && (self.base).segment_clear_without(a, b, Some(&self.removed), None)
+            && (self.base).segment_clear_without(a, b, Some(&self.removed), None, &mut { NO_HINT })
     }
 
     fn segment_clear_between(&self, a: Vec3, b: Vec3, ends: &Ends) -> bool {
         self.added.segment_clear_between(a, b, ends)
-            && (self.base).segment_clear_without(a, b, Some(&self.removed), Some(ends))
+            && (self.base)
+                .segment_clear_without(a, b, Some(&self.removed), Some(ends), &mut { NO_HINT })
     }
 
     fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit> {
@@ -583,6 +638,47 @@ mod tests {
             }
         }
         assert!(hits > 1000, "the test must exercise hits ({hits})");
+    }
+
+    #[test]
+    fn a_blocker_hint_does_not_change_the_answer() {
+        // Random segments through a soup, with and without the triangle ends left out, each
+        // asked with the blocker the last one found (the refinement's use), with a wrong hint
+        // (a triangle far off) and with an index out of range: always the unhinted answer, and
+        // a blocked segment names a triangle that blocks it.
+        let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+        let tris = soup(&mut rng, 80);
+        let bvh = Bvh::new(&tris);
+        let ends = Ends::new(
+            &tris[0].map(DVec3::from),
+            DVec3::Z,
+            &tris[1].map(DVec3::from),
+            -DVec3::Z,
+        );
+        let (mut carried, mut blocked, mut hinted_hits) = (u32::MAX, 0, 0);
+        for k in 0..20_000 {
+            let p = |rng: &mut Rng| Vec3::new(rng.next(), rng.next(), rng.next()) * 4.0 - 2.0;
+            let (a, b) = (p(&mut rng), p(&mut rng));
+            let e = (k % 2 == 0).then_some(&ends);
+            let plain = match e {
+                Some(e) => bvh.segment_clear_between(a, b, e),
+                None => bvh.segment_clear(a, b),
+            };
+            let before = carried;
+            let hinted = bvh.segment_clear_hinted(a, b, e, &mut carried);
+            assert_eq!(hinted, plain, "segment {a} -> {b} with hint {before}");
+            if !plain {
+                blocked += 1;
+                hinted_hits += u32::from(carried == before);
+                let mut again = carried;
+                assert!(!bvh.segment_clear_hinted(a, b, e, &mut again), "{carried}");
+            }
+            for mut wrong in [k % 80, u32::MAX - 1] {
+                assert_eq!(bvh.segment_clear_hinted(a, b, e, &mut wrong), plain);
+            }
+        }
+        assert!(blocked > 1000, "{blocked}");
+        assert!(hinted_hits > 0, "the carried blocker never answered");
     }
 
     #[test]

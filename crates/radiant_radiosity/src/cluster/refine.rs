@@ -297,7 +297,7 @@ impl Refiner<'_> {
                         Top::Split(op, first, n)
                     }
                     v => {
-                        work.push(Work::Done(r, s, v, sight.clear));
+                        work.push(Work::Done(r, s, v, sight));
                         Top::Work(work.len() - 1)
                     }
                 };
@@ -377,9 +377,9 @@ impl Refiner<'_> {
                 self.refine((r, s, sight), cur, out, shared, &mut since);
                 self.count(since, shared);
             }
-            Work::Done(r, s, ref v, clear) => {
+            Work::Done(r, s, ref v, sight) => {
                 let mut since = 0;
-                self.emit((r, s, clear), v, out, shared, &mut since);
+                self.emit((r, s, sight), v, out, shared, &mut since);
                 self.count(since, shared);
             }
         }
@@ -417,7 +417,7 @@ impl Refiner<'_> {
                 }
                 out.close_split(start);
             }
-            v => self.emit((r, s, sight.clear), &v, out, shared, since),
+            v => self.emit((r, s, sight), &v, out, shared, since),
         }
         if *since >= 1024 {
             let links = std::mem::take(since);
@@ -429,7 +429,7 @@ impl Refiner<'_> {
     /// Records a visit that is not a split.
     fn emit(
         &self,
-        (r, s, clear): (u32, u32, bool),
+        (r, s, sight): (u32, u32, Sight),
         v: &Visit,
         out: &mut Piece,
         shared: &Shared,
@@ -456,7 +456,7 @@ impl Refiner<'_> {
                         Some(links) => links.get(r, s),
                         None => {
                             shared.computed.fetch_add(1, Ordering::Relaxed);
-                            self.form_factor(r, s, err, clear) as f32
+                            self.form_factor(r, s, err, sight) as f32
                         }
                     },
                 };
@@ -529,7 +529,7 @@ impl Refiner<'_> {
         // not cast) and each is held against what moved.
         if !b.clear_of_changes(self.tree, r, s) {
             let changes = b.segments();
-            self.form_factor_with(&changes, r, s, err, false);
+            self.form_factor_with(&changes, r, s, err, Sight::UNKNOWN);
             if changes.met() {
                 return None;
             }
@@ -696,10 +696,11 @@ impl Refiner<'_> {
         .clamp(1, self.samples.saturating_mul(ABOVE).max(1))
     }
 
-    /// The form factor of `r ← s`, visibility included; `clear`: nothing lies between them
-    /// ([`Refiner::look`]), so no segment between two triangles needs a ray.
-    fn form_factor(&self, r: u32, s: u32, err: f64, clear: bool) -> f64 {
-        self.form_factor_with(self.vis, r, s, err, clear)
+    /// The form factor of `r ← s`, visibility included; `sight`: what lies between them
+    /// ([`Refiner::look`]): where nothing does, no segment between two triangles needs a ray,
+    /// and where something does, it is tried first.
+    fn form_factor(&self, r: u32, s: u32, err: f64, sight: Sight) -> f64 {
+        self.form_factor_with(self.vis, r, s, err, sight)
     }
 
     /// What lies between mesh nodes `r` and `s`, where a pair of them is split: a pair whose
@@ -721,14 +722,21 @@ impl Refiner<'_> {
     }
 
     /// [`Refiner::form_factor`] with the segments asked of `vis`.
-    fn form_factor_with(&self, vis: &dyn Visibility, r: u32, s: u32, err: f64, clear: bool) -> f64 {
+    fn form_factor_with(
+        &self,
+        vis: &dyn Visibility,
+        r: u32,
+        s: u32,
+        err: f64,
+        sight: Sight,
+    ) -> f64 {
         // Samples by what the link may carry: one where it is far below the threshold, the
         // full count near it, `ABOVE` times that on links above it that could not be split.
         let n = self.samples_for(err);
         let mut rng = Rng::new(hash(self.seed, self.stable_id(r), self.stable_id(s)));
         let m = self.tree.mesh_nodes;
         if r < m && s < m {
-            return self.planar((vis, clear), r, s, n, &mut rng);
+            return self.planar((vis, sight), r, s, n, &mut rng);
         }
         // A cluster link's estimate is its form factor too, not only its visibility: never
         // fewer than half the full count, unless it carries so little that one would do for
@@ -741,6 +749,8 @@ impl Refiner<'_> {
         let a_s = self.tree.area[s as usize];
         let da = a_s / f64::from(n);
         let mut sum = 0.0;
+        // What blocked the last segment is tried first on the next.
+        let mut blocker = u32::MAX;
         for k in 0..n {
             let u = (f64::from(k) + rng.f64()) / f64::from(n);
             let (x, nx) = self.sample(r, u, &mut rng);
@@ -752,7 +762,7 @@ impl Refiner<'_> {
             if cr <= 0.0 || cs <= 0.0 || d2 <= 0.0 {
                 continue;
             }
-            if vis.segment_clear(x.as_vec3(), p.as_vec3()) {
+            if vis.segment_clear_hinted(x.as_vec3(), p.as_vec3(), None, &mut blocker) {
                 // The disc form (Wallace et al.) keeps a near pair from dominating.
                 sum += (cr * cs / d2) / (PI * d2 + da);
             }
@@ -781,10 +791,11 @@ impl Refiner<'_> {
     }
 
     /// Two triangles: the unoccluded form factor times the clear fraction of `n` segments
-    /// (all of them, without rays, where the shaft between them is `clear`).
+    /// (all of them, without rays, where the shaft between them is clear; where it is not,
+    /// its witness, then each segment's blocker, is tried first on the next segment).
     fn planar(
         &self,
-        (vis, clear): (&dyn Visibility, bool),
+        (vis, sight): (&dyn Visibility, Sight),
         r: u32,
         s: u32,
         n: u32,
@@ -828,6 +839,7 @@ impl Refiner<'_> {
         // such hits no longer hid them).
         let ends = radiant_visibility::Ends::new(&nr.v, nr.normal, &ns.v, ns.normal);
         let (mut seen, mut valid) = (0.0f64, 0.0f64);
+        let mut blocker = sight.witness;
         for k in 0..n {
             let u = (f64::from(k) + rng.f64()) / f64::from(n);
             let x = sample_triangle(&nr.v, u, rng.f64());
@@ -843,7 +855,9 @@ impl Refiner<'_> {
                 continue;
             }
             valid += w;
-            if clear || vis.segment_clear_between(x.as_vec3(), p.as_vec3(), &ends) {
+            if sight.clear
+                || vis.segment_clear_hinted(x.as_vec3(), p.as_vec3(), Some(&ends), &mut blocker)
+            {
                 seen += w;
             }
         }
@@ -887,8 +901,8 @@ pub(crate) fn carry_err(
 enum Work {
     /// Refine the pair depth first.
     Refine(u32, u32, Cursor, Sight),
-    /// Decided at the top (not a split); whether its shaft is clear.
-    Done(u32, u32, Visit, bool),
+    /// Decided at the top (not a split); what lies between its nodes.
+    Done(u32, u32, Visit, Sight),
 }
 
 /// What the pairs holding a pair found between its nodes ([`Refiner::look`]).
