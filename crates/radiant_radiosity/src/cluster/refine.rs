@@ -373,14 +373,14 @@ impl Refiner<'_> {
     fn run(&self, w: &Work, out: &mut Piece, shared: &Shared) {
         match *w {
             Work::Refine(r, s, cur, sight) => {
-                let mut since = 0;
-                self.refine((r, s, sight), cur, out, shared, &mut since);
-                self.count(since, shared);
+                let mut pass = Pass::default();
+                self.refine((r, s, sight), cur, out, shared, &mut pass);
+                self.count(pass.since, shared);
             }
             Work::Done(r, s, ref v, sight) => {
-                let mut since = 0;
-                self.emit((r, s, sight), v, out, shared, &mut since);
-                self.count(since, shared);
+                let mut pass = Pass::default();
+                self.emit((r, s, sight), v, out, shared, &mut pass);
+                self.count(pass.since, shared);
             }
         }
     }
@@ -403,7 +403,7 @@ impl Refiner<'_> {
         cur: Cursor,
         out: &mut Piece,
         shared: &Shared,
-        since: &mut u64,
+        pass: &mut Pass,
     ) -> bool {
         match self.visit(r, s, cur) {
             Visit::Split(op, pairs, n, cursors) => {
@@ -411,16 +411,16 @@ impl Refiner<'_> {
                 let sight = self.look(r, s, sight);
                 for k in 0..n {
                     let (r, s) = pairs[k];
-                    if !self.refine((r, s, sight), cursors[k], out, shared, since) {
+                    if !self.refine((r, s, sight), cursors[k], out, shared, pass) {
                         return false;
                     }
                 }
                 out.close_split(start);
             }
-            v => self.emit((r, s, sight), &v, out, shared, since),
+            v => self.emit((r, s, sight), &v, out, shared, pass),
         }
-        if *since >= 1024 {
-            let links = std::mem::take(since);
+        if pass.since >= 1024 {
+            let links = std::mem::take(&mut pass.since);
             return self.count(links, shared);
         }
         true
@@ -433,7 +433,7 @@ impl Refiner<'_> {
         v: &Visit,
         out: &mut Piece,
         shared: &Shared,
-        since: &mut u64,
+        pass: &mut Pass,
     ) {
         match *v {
             Visit::Copy(from, to) => {
@@ -443,7 +443,7 @@ impl Refiner<'_> {
                 out.copy_from(from, to);
                 let links = to.links - from.links;
                 shared.kept.fetch_add(links, Ordering::Relaxed);
-                *since += links;
+                pass.since += links;
             }
             Visit::Cull => out.push(Op::Cull, None),
             Visit::Link(err, reuse) => {
@@ -456,7 +456,7 @@ impl Refiner<'_> {
                         Some(links) => links.get(r, s),
                         None => {
                             shared.computed.fetch_add(1, Ordering::Relaxed);
-                            self.form_factor(r, s, err, sight) as f32
+                            self.form_factor(r, s, err, sight, &mut pass.blocker) as f32
                         }
                     },
                 };
@@ -469,7 +469,7 @@ impl Refiner<'_> {
                             ff: f,
                         }),
                     );
-                    *since += 1;
+                    pass.since += 1;
                 } else {
                     out.push(Op::Zero, None);
                 }
@@ -529,7 +529,7 @@ impl Refiner<'_> {
         // not cast) and each is held against what moved.
         if !b.clear_of_changes(self.tree, r, s) {
             let changes = b.segments();
-            self.form_factor_with(&changes, r, s, err, Sight::UNKNOWN);
+            self.form_factor_with(&changes, (r, s, err), Sight::UNKNOWN, &mut { u32::MAX });
             if changes.met() {
                 return None;
             }
@@ -699,8 +699,8 @@ impl Refiner<'_> {
     /// The form factor of `r ← s`, visibility included; `sight`: what lies between them
     /// ([`Refiner::look`]): where nothing does, no segment between two triangles needs a ray,
     /// and where something does, it is tried first.
-    fn form_factor(&self, r: u32, s: u32, err: f64, sight: Sight) -> f64 {
-        self.form_factor_with(self.vis, r, s, err, sight)
+    fn form_factor(&self, r: u32, s: u32, err: f64, sight: Sight, blocker: &mut u32) -> f64 {
+        self.form_factor_with(self.vis, (r, s, err), sight, blocker)
     }
 
     /// What lies between mesh nodes `r` and `s`, where a pair of them is split: a pair whose
@@ -721,14 +721,15 @@ impl Refiner<'_> {
         Sight { clear, witness }
     }
 
-    /// [`Refiner::form_factor`] with the segments asked of `vis`.
+    /// [`Refiner::form_factor`] with the segments asked of `vis`. `blocker`: a triangle that
+    /// blocked a segment of a link refined just before (`u32::MAX`: none), tried first, and
+    /// the last blocker this link's segments met.
     fn form_factor_with(
         &self,
         vis: &dyn Visibility,
-        r: u32,
-        s: u32,
-        err: f64,
+        (r, s, err): (u32, u32, f64),
         sight: Sight,
+        blocker: &mut u32,
     ) -> f64 {
         // Samples by what the link may carry: one where it is far below the threshold, the
         // full count near it, `ABOVE` times that on links above it that could not be split.
@@ -736,7 +737,7 @@ impl Refiner<'_> {
         let mut rng = Rng::new(hash(self.seed, self.stable_id(r), self.stable_id(s)));
         let m = self.tree.mesh_nodes;
         if r < m && s < m {
-            return self.planar((vis, sight), r, s, n, &mut rng);
+            return self.planar((vis, sight, blocker), r, s, n, &mut rng);
         }
         // A cluster link's estimate is its form factor too, not only its visibility: never
         // fewer than half the full count, unless it carries so little that one would do for
@@ -750,7 +751,6 @@ impl Refiner<'_> {
         let da = a_s / f64::from(n);
         let mut sum = 0.0;
         // What blocked the last segment is tried first on the next.
-        let mut blocker = u32::MAX;
         for k in 0..n {
             let u = (f64::from(k) + rng.f64()) / f64::from(n);
             let (x, nx) = self.sample(r, u, &mut rng);
@@ -762,7 +762,8 @@ impl Refiner<'_> {
             if cr <= 0.0 || cs <= 0.0 || d2 <= 0.0 {
                 continue;
             }
-            if vis.segment_clear_hinted(x.as_vec3(), p.as_vec3(), None, &mut blocker) {
+            // What blocked the last segment is tried first on the next.
+            if vis.segment_clear_hinted(x.as_vec3(), p.as_vec3(), None, blocker) {
                 // The disc form (Wallace et al.) keeps a near pair from dominating.
                 sum += (cr * cs / d2) / (PI * d2 + da);
             }
@@ -792,10 +793,11 @@ impl Refiner<'_> {
 
     /// Two triangles: the unoccluded form factor times the clear fraction of `n` segments
     /// (all of them, without rays, where the shaft between them is clear; where it is not,
-    /// its witness, then each segment's blocker, is tried first on the next segment).
+    /// the last `blocker` met, or else the shaft's witness, is tried first, then each
+    /// segment's blocker on the next).
     fn planar(
         &self,
-        (vis, sight): (&dyn Visibility, Sight),
+        (vis, sight, blocker): (&dyn Visibility, Sight, &mut u32),
         r: u32,
         s: u32,
         n: u32,
@@ -839,7 +841,9 @@ impl Refiner<'_> {
         // such hits no longer hid them).
         let ends = radiant_visibility::Ends::new(&nr.v, nr.normal, &ns.v, ns.normal);
         let (mut seen, mut valid) = (0.0f64, 0.0f64);
-        let mut blocker = sight.witness;
+        if *blocker == u32::MAX {
+            *blocker = sight.witness;
+        }
         for k in 0..n {
             let u = (f64::from(k) + rng.f64()) / f64::from(n);
             let x = sample_triangle(&nr.v, u, rng.f64());
@@ -856,7 +860,7 @@ impl Refiner<'_> {
             }
             valid += w;
             if sight.clear
-                || vis.segment_clear_hinted(x.as_vec3(), p.as_vec3(), Some(&ends), &mut blocker)
+                || vis.segment_clear_hinted(x.as_vec3(), p.as_vec3(), Some(&ends), blocker)
             {
                 seen += w;
             }
@@ -895,6 +899,25 @@ pub(crate) fn carry_err(
         * cos(r, d)
         * cos(s, -d);
     if est.is_finite() { est } else { f64::MAX }
+}
+
+/// What a piece of work carries from one link to the next, depth first.
+#[derive(Clone, Copy, Debug)]
+struct Pass {
+    /// Links made since they were last counted against the budget.
+    since: u64,
+    /// The last triangle that blocked a segment (`u32::MAX`: none), tried first on the next
+    /// link's segments: siblings mostly look past the same wall.
+    blocker: u32,
+}
+
+impl Default for Pass {
+    fn default() -> Pass {
+        Pass {
+            since: 0,
+            blocker: u32::MAX,
+        }
+    }
 }
 
 /// A piece of the refinement's parallel part.
