@@ -343,7 +343,7 @@ fn write_outputs(args: &BakeArgs, job: &Job, result: &BakeResult) -> anyhow::Res
             .map(|()| (map, lightmap_s, lap.elapsed().as_secs_f64()));
         (tables.join(), light)
     });
-    tables.map_err(|_| anyhow::anyhow!("writing surfaces.csv and patches.csv failed"))??;
+    tables.map_err(|_| anyhow::anyhow!("writing surfaces.csv and patches.csv panicked"))??;
     let (map, lightmap_s, write_s) = light?;
     let export = match &args.export {
         Some(path) => export(job, &map, path)?,

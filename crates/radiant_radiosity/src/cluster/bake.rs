@@ -1179,7 +1179,8 @@ mod tests {
     use std::sync::atomic::AtomicU64;
 
     /// The BVH, counting the segments cast and the shafts found clear; with `shafts` off it
-    /// keeps its shaft test to itself, so that every link casts its rays.
+    /// keeps its shaft test and its blocker hints to itself, so that every link casts its
+    /// rays and every ray traverses the BVH.
     struct Counted<'a> {
         bvh: &'a Bvh,
         shafts: bool,
@@ -1195,6 +1196,20 @@ mod tests {
         fn segment_clear_between(&self, a: Vec3, b: Vec3, ends: &Ends) -> bool {
             self.segments.fetch_add(1, Ordering::Relaxed);
             self.bvh.segment_clear_between(a, b, ends)
+        }
+        fn segment_clear_hinted(
+            &self,
+            a: Vec3,
+            b: Vec3,
+            ends: Option<&Ends>,
+            blocker: &mut u32,
+        ) -> bool {
+            self.segments.fetch_add(1, Ordering::Relaxed);
+            match ends {
+                _ if self.shafts => self.bvh.segment_clear_hinted(a, b, ends, blocker),
+                Some(e) => self.bvh.segment_clear_between(a, b, e),
+                None => self.bvh.segment_clear(a, b),
+            }
         }
         fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit> {
             self.bvh.closest_hit(origin, dir, tmax)
@@ -1215,8 +1230,10 @@ mod tests {
 
     #[test]
     fn links_below_a_clear_shaft_are_the_links_their_rays_give() {
-        // The Cornell box: the links refined with shafts (no rays below a clear one) and with
-        // every ray cast are the same, form factors bit for bit, and the shafts spared rays.
+        // The Cornell box: the links refined with shafts (no rays below a clear one) and
+        // blocker hints (a segment tries first what blocked the last) and with every ray cast
+        // through the whole BVH are the same, form factors bit for bit, and the shafts spared
+        // rays.
         let scene = radiant_scene::builtin("cornell-box").expect("builtin");
         let params = BakeParams::default();
         let mesh = Mesh::adaptive(&scene, &params.mesh, &mut |_| Ok(())).expect("meshes");
