@@ -157,7 +157,10 @@ fn saved_record(
     };
     let replay = refine::Replay::new(&rows.row, &rows.src, &rows.ff);
     let rebuilt = Record::rebuilt(ops, sized, tree.root(mesh), children, |r, s| {
-        replay.get(r, s)
+        replay.get(r, s).map_or(0.0, |f| {
+            replay.met(1);
+            f
+        })
     });
     let whole = rebuilt
         .as_ref()
