@@ -11,7 +11,7 @@ use radiant::radiosity::{BakeEvent, BakeParams, BakeResult};
 use radiant::scene::Scene;
 
 use crate::args::Hierarchy;
-use crate::common::progress_bar;
+use crate::common::{PROGRESS, ProgressLog, progress_bar};
 
 /// Whether this bake uses the clustered hierarchy (see `--hierarchy`).
 pub(crate) fn use_clustered(
@@ -78,7 +78,7 @@ pub(crate) fn bake_clustered(
         ..ClusterParams::default()
     };
     let pb = progress_bar(1, "links (clustered)");
-    let last_log = std::sync::Mutex::new(Instant::now());
+    let log = ProgressLog::new();
     let progress = |phase: Phase, done: usize, total: usize| {
         match phase {
             Phase::Links => {
@@ -90,11 +90,8 @@ pub(crate) fn bake_clustered(
             }
         }
         // Also in the log, every few seconds, for runs without a terminal.
-        if let Ok(mut t) = last_log.lock()
-            && t.elapsed().as_secs_f64() >= 5.0
-        {
-            *t = Instant::now();
-            tracing::info!(?phase, done, total, "clustered bake progress");
+        if log.due() {
+            tracing::info!(target: PROGRESS, ?phase, done, total, "clustered bake progress");
         }
     };
     let resumed = checkpoint.filter(|p| p.exists()).and_then(|path| {
@@ -158,10 +155,20 @@ pub(crate) fn bake_triangles(
     let (bake, pb) = start_bake(scene, params, checkpoint)?;
     pb.set_length(1000);
     pb.set_position(0);
+    let log = ProgressLog::new();
     let result = bake.run_to_end(&mut |BakeEvent::Solve(p, t)| {
         // The solve's own progress: in log error, from 1 down to the tolerance.
         pb.set_position((p.progress * 1000.0) as u64);
         pb.set_message(format!("solving, residual {:.1e}", p.residual));
+        if log.due() {
+            tracing::info!(
+                target: PROGRESS,
+                iterations = p.iterations,
+                residual = p.residual,
+                progress = p.progress,
+                "solve progress"
+            );
+        }
         tracing::debug!(
             t,
             iterations = p.iterations,
@@ -184,6 +191,7 @@ pub(crate) fn start_bake(
     checkpoint: Option<&Path>,
 ) -> anyhow::Result<(radiant::radiosity::Bake, indicatif::ProgressBar)> {
     let pb = progress_bar(1, "form factors");
+    let log = ProgressLog::new();
     let resumed = checkpoint.filter(|p| p.exists()).and_then(|path| {
         match radiant::radiosity::Bake::resume(scene, params, path) {
             Ok(b) => {
@@ -201,6 +209,9 @@ pub(crate) fn start_bake(
         None => radiant::radiosity::Bake::with_progress(scene, params, &|done, total| {
             pb.set_length(total as u64);
             pb.set_position(done as u64);
+            if log.due() {
+                tracing::info!(target: PROGRESS, done, total, "form factors progress");
+            }
         })?,
     };
     pb.set_message("solving");

@@ -40,6 +40,70 @@ pub fn reference_for(
     }
 }
 
+/// The log target of progress lines. The default log filter lets it through at `info` when
+/// standard error is not a terminal, where the progress bars are hidden: a run in a pipeline,
+/// under `nohup` or in CI still says how far it is.
+pub(crate) const PROGRESS: &str = "radiant::progress";
+
+/// Seconds between progress lines in the log when `RADIANT_PROGRESS_SECONDS` does not say.
+const PROGRESS_SECONDS: f64 = 5.0;
+
+/// The default log filter (`RUST_LOG` replaces it): warnings, and the progress lines where no
+/// bar shows them.
+pub(crate) fn default_log_filter(stderr_is_terminal: bool) -> String {
+    if stderr_is_terminal {
+        "warn".to_string()
+    } else {
+        format!("warn,{PROGRESS}=info")
+    }
+}
+
+/// When a long phase's progress goes to the log: at most one line every
+/// `RADIANT_PROGRESS_SECONDS` seconds (default 5; 0: every report), the first that long after
+/// the phase began.
+pub(crate) struct ProgressLog {
+    every: f64,
+    last: std::sync::Mutex<std::time::Instant>,
+}
+
+impl ProgressLog {
+    /// From `RADIANT_PROGRESS_SECONDS`, or the default where it is unset or not a number of
+    /// seconds.
+    pub(crate) fn new() -> ProgressLog {
+        let every = std::env::var("RADIANT_PROGRESS_SECONDS").ok();
+        ProgressLog::every(parse_progress_seconds(every.as_deref()))
+    }
+
+    /// A line at most every `seconds`.
+    pub(crate) fn every(seconds: f64) -> ProgressLog {
+        ProgressLog {
+            every: seconds,
+            last: std::sync::Mutex::new(std::time::Instant::now()),
+        }
+    }
+
+    /// Whether a line is due now; if so, the next is due `every` seconds from now.
+    pub(crate) fn due(&self) -> bool {
+        let Ok(mut last) = self.last.lock() else {
+            return false;
+        };
+        if last.elapsed().as_secs_f64() < self.every {
+            return false;
+        }
+        *last = std::time::Instant::now();
+        true
+    }
+}
+
+/// `RADIANT_PROGRESS_SECONDS`: a finite number of seconds, at least 0; anything else gives
+/// the default.
+fn parse_progress_seconds(value: Option<&str>) -> f64 {
+    value
+        .and_then(|v| v.trim().parse::<f64>().ok())
+        .filter(|s| s.is_finite() && *s >= 0.0)
+        .unwrap_or(PROGRESS_SECONDS)
+}
+
 /// A progress bar on a terminal; hidden otherwise.
 pub fn progress_bar(len: u64, what: &str) -> ProgressBar {
     let pb = ProgressBar::new(len);
@@ -89,4 +153,33 @@ pub(crate) fn apply_sky(
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn progress_lines_are_spaced_and_shown_where_no_bar_is() {
+        assert_eq!(parse_progress_seconds(None), PROGRESS_SECONDS);
+        assert_eq!(parse_progress_seconds(Some(" 30 ")), 30.0);
+        assert_eq!(parse_progress_seconds(Some("0")), 0.0);
+        for bad in ["-1", "nan", "inf", "soon", ""] {
+            assert_eq!(parse_progress_seconds(Some(bad)), PROGRESS_SECONDS, "{bad}");
+        }
+        let every = ProgressLog::every(0.0);
+        assert!(every.due() && every.due());
+        let rarely = ProgressLog::every(3600.0);
+        assert!(
+            !rarely.due(),
+            "the first line comes a whole interval after the start"
+        );
+        assert_eq!(default_log_filter(true), "warn");
+        let piped = default_log_filter(false);
+        assert!(piped.contains(&format!("{PROGRESS}=info")), "{piped}");
+        assert!(
+            tracing_subscriber::EnvFilter::try_new(&piped).is_ok(),
+            "{piped}"
+        );
+    }
 }

@@ -9,7 +9,9 @@ use radiant::radiosity::{Bake, FormFactorKind, Rgb, SolveError, SolverKind};
 
 use crate::ConvergeArgs;
 use crate::args::{Hierarchy, Method, Reference};
-use crate::common::{NamedReference, load_scene, progress_bar, reference_for};
+use crate::common::{
+    NamedReference, PROGRESS, ProgressLog, load_scene, progress_bar, reference_for,
+};
 use crate::output::{ensure_dir, write_atomic};
 use crate::plot::{Curve, plot_convergence};
 
@@ -165,9 +167,13 @@ fn curve(
     let mut params = args.solve.params(solver, ff)?;
     params.time_limit = Some(crate::common::seconds(time_limit)?);
     let pb = progress_bar(1, label);
+    let log = ProgressLog::new();
     let mut bake = match Bake::with_progress(scene, &params, &|d, n| {
         pb.set_length(n as u64);
         pb.set_position(d as u64);
+        if log.due() {
+            tracing::info!(target: PROGRESS, curve = label, done = d, total = n, "form factors progress");
+        }
     }) {
         Ok(b) => b,
         Err(e) => {
@@ -385,10 +391,14 @@ fn clustered_point(
         ..ClusterParams::default()
     };
     let pb = progress_bar(1, &format!("{label}, refinement {r}"));
+    let log = ProgressLog::new();
     let t = Instant::now();
-    let result = cluster::bake(scene, &params, &cp, &|_, done, total| {
+    let result = cluster::bake(scene, &params, &cp, &|phase, done, total| {
         pb.set_length(total as u64);
         pb.set_position(done as u64);
+        if log.due() {
+            tracing::info!(target: PROGRESS, curve = label, refinement = r, ?phase, done, total, "clustered bake progress");
+        }
     });
     let t_s = t.elapsed().as_secs_f64();
     pb.finish_and_clear();

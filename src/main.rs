@@ -355,11 +355,16 @@ fn main() -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
+    // Where standard error is not a terminal the progress bars are hidden: the log says how
+    // far a long phase is instead, without colour codes.
+    let stderr_is_terminal = std::io::IsTerminal::is_terminal(&std::io::stderr());
     tracing_subscriber::fmt()
         .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_env("RUST_LOG")
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+            tracing_subscriber::EnvFilter::try_from_env("RUST_LOG").unwrap_or_else(|_| {
+                tracing_subscriber::EnvFilter::new(common::default_log_filter(stderr_is_terminal))
+            }),
         )
+        .with_ansi(stderr_is_terminal)
         .with_writer(std::io::stderr)
         .init();
     let result = match cli.command {

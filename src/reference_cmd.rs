@@ -2,7 +2,6 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::Context as _;
@@ -14,7 +13,7 @@ use radiant::scene::Scene;
 use serde_json::{Value, json};
 
 use crate::SceneArgs;
-use crate::common::{load_scene, progress_bar};
+use crate::common::{PROGRESS, ProgressLog, load_scene, progress_bar};
 use crate::output::{csv_name, ensure_dir, exr_bytes, preview_png, write_atomic};
 
 /// `radiant reference`.
@@ -179,18 +178,16 @@ fn read_points(path: &Path) -> anyhow::Result<Vec<Point>> {
 pub(crate) fn progress_reporter(what: &str) -> (indicatif::ProgressBar, impl Fn(&Progress) + Sync) {
     let pb = progress_bar(1000, what);
     let bar = pb.clone();
-    let last_log = Mutex::new(Instant::now());
+    let log = ProgressLog::new();
     let f = move |p: &Progress| {
         bar.set_position((p.fraction * 1000.0) as u64);
         let eta = p
             .eta_seconds
             .map_or(String::new(), |s| format!(", about {s:.0} s left"));
         bar.set_message(format!("{}: {:.2} % se{eta}", p.what, 100.0 * p.rel_error));
-        if let Ok(mut t) = last_log.lock()
-            && t.elapsed().as_secs_f64() >= 5.0
-        {
-            *t = Instant::now();
+        if log.due() {
             tracing::info!(
+                target: PROGRESS,
                 what = p.what,
                 paths = p.paths,
                 rel_error = p.rel_error,

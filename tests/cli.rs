@@ -6,6 +6,38 @@ use std::path::PathBuf;
 mod common;
 use common::{radiant, run_ok, tmp};
 
+/// Without a terminal the progress bars are hidden, and the log says how far a bake is:
+/// lines under `radiant::progress`, plain text, also with `RUST_LOG` unset.
+#[test]
+fn progress_goes_to_the_log_without_a_terminal() {
+    for (hierarchy, line) in [
+        ("triangles", "form factors progress"),
+        ("clustered", "clustered bake progress"),
+    ] {
+        let out = tmp("progress");
+        let st = radiant()
+            .args(["bake", "--builtin", "cornell-box", "--patch-size", "0.3"])
+            .args(["--hierarchy", hierarchy, "--out"])
+            .arg(&out)
+            .env_remove("RUST_LOG")
+            .env("RADIANT_PROGRESS_SECONDS", "0")
+            .output()
+            .expect("runs");
+        let stderr = String::from_utf8_lossy(&st.stderr);
+        assert!(st.status.success(), "{hierarchy}: {stderr}");
+        assert!(
+            stderr.contains("radiant::progress"),
+            "{hierarchy}: {stderr}"
+        );
+        assert!(stderr.contains(line), "{hierarchy}: {stderr}");
+        assert!(stderr.contains("total="), "{hierarchy}: {stderr}");
+        assert!(
+            !stderr.contains('\u{1b}'),
+            "{hierarchy}: colour codes: {stderr}"
+        );
+    }
+}
+
 #[test]
 fn bake_writes_every_output() {
     let out = tmp("bake");
