@@ -28,7 +28,8 @@ pub(crate) struct ReferenceArgs {
     /// thread count); with --target-error or --time-limit, at most that many.
     #[arg(long)]
     pub(crate) samples: Option<u64>,
-    /// Target relative standard error of each surface and point, and of the image as a whole
+    /// Target relative standard error of each surface and point (one darker than a thousandth
+    /// of the median one is held to that absolute error), and of the image as a whole
     /// (Σ se / Σ mean). Default 0.005 when neither --samples nor --time-limit is given.
     #[arg(long)]
     pub(crate) target_error: Option<f64>,

@@ -93,7 +93,11 @@ pub struct Params {
     /// Samples (paths) per item: per surface, point or pixel.
     pub samples: Option<u64>,
     /// Target relative standard error: `‖se‖ / ‖mean‖` over RGB per surface or point (after
-    /// at least 4096 paths each); over an image, `Σ se / Σ mean` over all pixels and channels.
+    /// at least 4096 paths each), where `‖mean‖` counts as at least [`DARK`] times the median
+    /// item's (so a surface a thousand times darker than most, the ceiling behind a light
+    /// panel, is held to the absolute error of one a thousandth as bright as they are, and does
+    /// not chase its relative error to the time limit; the median, so that one bright lamp
+    /// does not loosen the rest); over an image, `Σ se / Σ mean` over all pixels and channels.
     pub target_error: Option<f64>,
     /// Wall-clock limit.
     pub time_limit: Option<Duration>,
@@ -154,11 +158,20 @@ pub struct Estimate {
     pub samples: u64,
 }
 
+/// A surface or point darker than this fraction of the median one is held to the target
+/// error of a mean this bright ([`Params::target_error`]).
+pub const DARK: f64 = 1e-3;
+
 impl Estimate {
     /// `‖se‖ / ‖mean‖` over RGB: 0 when every sample was zero, infinite with one sample.
     pub fn rel_error(&self) -> f64 {
-        let norm = |v: &[f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-        let (se, mean) = (norm(&self.se), norm(&self.mean));
+        self.rel_error_above(0.0)
+    }
+
+    /// `‖se‖ / max(‖mean‖, floor)` over RGB: 0 when every sample was zero, infinite with one
+    /// sample of a mean below a zero floor.
+    pub fn rel_error_above(&self, floor: f64) -> f64 {
+        let (se, mean) = (norm(&self.se), norm(&self.mean).max(floor));
         if se == 0.0 {
             0.0
         } else if mean > 0.0 {
@@ -167,6 +180,15 @@ impl Estimate {
             f64::INFINITY
         }
     }
+
+    /// `‖mean‖` over RGB.
+    pub fn magnitude(&self) -> f64 {
+        norm(&self.mean)
+    }
+}
+
+fn norm(v: &[f64; 3]) -> f64 {
+    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
 /// Why an estimate stopped.
@@ -204,7 +226,9 @@ pub struct Run {
     pub threads: usize,
     /// Which rule stopped it.
     pub stopped: Stopped,
-    /// The worst item's relative standard error (per-item rules) or the image's aggregate one.
+    /// The worst item's relative standard error as the target error measures it (per-item
+    /// rules: [`Estimate::rel_error_above`] with [`DARK`] times the median item's mean) or
+    /// the image's aggregate one.
     pub rel_error: f64,
 }
 

@@ -85,6 +85,17 @@ pub(crate) struct Job<'a, F> {
     pub(crate) progress: &'a (dyn Fn(&Progress) + Sync),
 }
 
+/// The median of the estimates' `‖mean‖` (0 for none, or where it is not finite).
+fn median_magnitude(estimates: &[Estimate]) -> f64 {
+    let mut m: Vec<f64> = estimates.iter().map(Estimate::magnitude).collect();
+    if m.is_empty() {
+        return 0.0;
+    }
+    let k = m.len() / 2;
+    let (_, mid, _) = m.select_nth_unstable_by(k, f64::total_cmp);
+    if mid.is_finite() { *mid } else { 0.0 }
+}
+
 fn aggregate_rel(sums: &[Sum]) -> f64 {
     let (mut se, mut mean) = (0.0, 0.0);
     for s in sums {
@@ -173,8 +184,12 @@ where
         match job.rule {
             Rule::PerItem => {
                 rel = 0.0;
+                // An item far darker than most is held to an absolute error, not its own
+                // relative one (which a surface near zero never reaches): see `DARK`.
+                let estimates: Vec<Estimate> = sums.iter().map(Sum::estimate).collect();
+                let floor = crate::DARK * median_magnitude(&estimates);
                 for i in 0..n {
-                    let r = sums[i].estimate().rel_error();
+                    let r = estimates[i].rel_error_above(floor);
                     rel = rel.max(r);
                     if let Some(t) = target {
                         active[i] = active[i] && (r > t || next[i] < job.min_chunks);

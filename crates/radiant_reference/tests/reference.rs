@@ -13,8 +13,8 @@ use std::f64::consts::PI;
 use std::time::Duration;
 
 use glam::DVec3;
-use radiant_radiosity::scenes::{add_surface, furnace, quad};
-use radiant_reference::{Estimate, Params, Point, ReferenceError, Stopped, Tracer};
+use radiant_radiosity::scenes::{add_surface, box_triangles, furnace, quad};
+use radiant_reference::{DARK, Estimate, Params, Point, ReferenceError, Stopped, Tracer};
 use radiant_scene::{Light, LightKind, Scene};
 
 fn samples(n: u64) -> Params {
@@ -322,6 +322,54 @@ fn a_target_error_stops_the_estimate_when_met() {
     // All-zero paths have no spread, which proves little: at least 4096 before stopping.
     assert_eq!(s[1].estimate.mean, [0.0; 3]);
     assert!(s[1].estimate.samples >= 4096, "{:?}", s[1].estimate);
+}
+
+#[test]
+fn a_surface_far_darker_than_the_rest_is_held_to_an_absolute_error() {
+    // The furnace's six walls as six surfaces (ρ 0.5, emitting 1: radiosity 2), and inside it
+    // a square facing up half a millimetre under a black cover facing down: only grazing light
+    // through the rim reaches the square, about 10⁻⁴ of the walls'. Its relative error would
+    // take far longer to reach the target than the walls'; it is held instead to the target
+    // times a thousandth of the median surface's mean.
+    let mut scene = Scene::default();
+    let walls = box_triangles(DVec3::ZERO, DVec3::ONE, true);
+    for (k, face) in walls.chunks(2).enumerate() {
+        add_surface(&mut scene, &format!("wall{k}"), [0.5; 3], [1.0; 3], face);
+    }
+    let dark = quad(
+        DVec3::new(0.1, 0.5, 0.1),
+        DVec3::new(0.0, 0.0, 0.8),
+        DVec3::new(0.8, 0.0, 0.0),
+    );
+    add_surface(&mut scene, "dark", [0.5; 3], [0.0; 3], &dark);
+    let cover = quad(
+        DVec3::new(0.1, 0.5005, 0.1),
+        DVec3::new(0.8, 0.0, 0.0),
+        DVec3::new(0.0, 0.0, 0.8),
+    );
+    add_surface(&mut scene, "cover", [0.0; 3], [0.0; 3], &cover);
+    let tracer = Tracer::new(&scene).expect("scene");
+    let t = 0.02;
+    let p = Params {
+        samples: None,
+        target_error: Some(t),
+        time_limit: Some(Duration::from_secs(120)),
+        seed: 5,
+    };
+    let (s, run) = tracer.surfaces(&p, &quiet).expect("trace");
+    assert_eq!(run.stopped, Stopped::Target, "{run:?}");
+    assert!(run.rel_error <= t, "{run:?}");
+    let wall = s[0].estimate.magnitude();
+    let d = &s[6].estimate;
+    // Lit, but far below a thousandth of the walls: its own relative error was not reached,
+    // its absolute one was.
+    assert!(d.mean[0] > 0.0, "{d:?}");
+    assert!(d.magnitude() < DARK * wall, "{d:?} against {wall}");
+    assert!(d.rel_error() > t, "{d:?}");
+    assert!(d.rel_error_above(DARK * wall) <= t, "{d:?}");
+    for w in &s[..6] {
+        assert!(w.estimate.rel_error() <= t, "{:?}", w.estimate);
+    }
 }
 
 #[test]
