@@ -398,9 +398,10 @@ impl ClusterBake {
         })
     }
 
-    /// One Jacobi sweep of gather and push-pull. The estimated error is the sweep's update
-    /// times `q / (1 − q)`, `q` the observed contraction, relative to the bounced light
-    /// (`b − source`: in a sunlit level the direct light dominates `‖b‖`, and a change
+    /// One Jacobi sweep of gather and push-pull, carried on where its contraction has settled
+    /// ([`Sweeping`]). The estimated error is the sweep's update times `q / (1 − q)`, `q` the
+    /// observed contraction (at least that of the last extrapolation), relative to the bounced
+    /// light (`b − source`: in a sunlit level the direct light dominates `‖b‖`, and a change
     /// measured against it stopped Sponza after 4 sweeps while its shade was still filling
     /// in). A solve that stalls or diverges is an error.
     pub fn step(&mut self) -> Result<Info, SolveError> {
@@ -409,15 +410,18 @@ impl ClusterBake {
         }
         let t = Instant::now();
         let s = &mut self.sweeps;
-        let nb = self
+        let mut nb = self
             .sys
             .sweep_in(&self.b, &self.sys.rho, &self.sys.source, &mut s.scratch);
         let residual = s.rule.residual(&self.sys, &nb, &self.b, &self.sys.source);
-        self.b = nb;
         s.since_start += 1;
         let iterations = s.info.iterations + 1;
         let tol = self.params.solver_params.tolerance;
         let converged = residual <= tol && s.since_start >= 2;
+        if !converged && residual.is_finite() {
+            s.rule.extrapolate(&mut nb, &self.b);
+        }
+        self.b = nb;
         if converged {
             // Nothing sweeps until the next change: the buffers go.
             s.scratch = SweepScratch::default();
@@ -1228,6 +1232,55 @@ mod tests {
             let clear = self.shafts && self.bvh.shaft_clear(a, na, b, nb, witness);
             self.clear.fetch_add(u64::from(clear), Ordering::Relaxed);
             clear
+        }
+    }
+
+    #[test]
+    fn extrapolated_sweeps_end_nearer_the_answer_in_fewer_sweeps() {
+        // The Cornell box clustered: sweeps with Aitken's extrapolation and without, to the
+        // default tolerance, against the same links swept to 10⁻¹⁰. With it: fewer sweeps, an
+        // answer at least as near, and an estimate still as near the error left.
+        let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+        let params = BakeParams::default();
+        let cp = ClusterParams::default();
+        let mut tight = ClusterBake::new(&scene, &params, &cp, &|_, _, _| {}, None).expect("bake");
+        tight.params.solver_params.tolerance = 1e-10;
+        tight.sweeps.rule.extrapolation = false;
+        while !tight.step().expect("sweeps").converged {}
+        let exact = tight.radiosity();
+        let sweep = |extrapolation: bool| {
+            let mut b = ClusterBake::new(&scene, &params, &cp, &|_, _, _| {}, None).expect("bake");
+            b.sweeps.rule.extrapolation = extrapolation;
+            let info = loop {
+                let info = b.step().expect("sweeps");
+                if info.converged {
+                    break info;
+                }
+            };
+            let got = b.radiosity();
+            let err = b.sys.norm(
+                &(got.iter().zip(&exact))
+                    .map(|(x, y)| std::array::from_fn(|c| x[c] - y[c]))
+                    .collect::<Vec<Rgb>>(),
+            );
+            let bounced = b.sys.norm(
+                &(exact.iter().zip(&b.sys.source))
+                    .map(|(x, y)| std::array::from_fn(|c| x[c] - y[c]))
+                    .collect::<Vec<Rgb>>(),
+            );
+            (info.iterations, err / bounced, info.residual)
+        };
+        let (plain, with) = (sweep(false), sweep(true));
+        eprintln!("without: {plain:?}; with: {with:?}");
+        assert!(with.0 + 2 <= plain.0, "sweeps: {with:?} against {plain:?}");
+        assert!(with.1 <= plain.1, "error: {with:?} against {plain:?}");
+        // The estimate is the error along the slowest mode: near the error left, not a strict
+        // bound (without extrapolation 8.91e-5 against an estimate of 8.89e-5).
+        for (_, err, estimate) in [plain, with] {
+            assert!(
+                err <= 1.1 * estimate,
+                "error {err} above its estimate {estimate}"
+            );
         }
     }
 

@@ -113,10 +113,27 @@ pub struct RowsRef<'a> {
 /// (`b − source`: in a sunlit level the direct light dominates `‖b‖`, and a change measured
 /// against it stopped Sponza after 4 sweeps while its shade was still filling in), times
 /// `q / (1 − q)`, `q` the observed contraction; with the stall rule.
+///
+/// Where the contraction has settled (two sweeps in a row within 1 % of each other, below
+/// [`Sweeping::MAX_Q`]), the error left is mostly along one mode that shrinks by `q` a sweep,
+/// and the sweep's update is carried on to where that mode ends: `b += q / (1 − q) (b − b_before)`
+/// (Aitken's extrapolation; [`Sweeping::extrapolate`]). From then on the estimate keeps that
+/// `q` as its least contraction: the update that follows no longer shows it, but what is left
+/// of the mode still shrinks that slowly.
 #[derive(Clone, Copy, Debug)]
 pub struct Sweeping {
     /// The last sweep's update (NaN before the first).
     last_update: f64,
+    /// The contraction the last sweep observed (NaN before the second).
+    last_q: f64,
+    /// The least contraction the estimate uses: that of the last extrapolation (0 before).
+    held_q: f64,
+    /// Sweeps since the last extrapolation, or since the start.
+    since: u32,
+    /// The factor the next [`Sweeping::extrapolate`] applies (0: none).
+    factor: f64,
+    /// Whether to extrapolate at all.
+    pub extrapolation: bool,
     /// The stall rule.
     pub stall: Stall,
 }
@@ -125,12 +142,21 @@ impl Default for Sweeping {
     fn default() -> Self {
         Sweeping {
             last_update: f64::NAN,
+            last_q: f64::NAN,
+            held_q: 0.0,
+            since: 0,
+            factor: 0.0,
+            extrapolation: true,
             stall: Stall::default(),
         }
     }
 }
 
 impl Sweeping {
+    /// Contractions above this are not extrapolated (reflectance near 1: the factor
+    /// `q / (1 − q)` would multiply any error in `q`).
+    pub const MAX_Q: f64 = 0.9;
+
     /// The estimated error after a sweep from `b` to `nb`.
     pub fn residual(&mut self, sys: &HierSystem, nb: &[Rgb], b: &[Rgb], source: &[Rgb]) -> f64 {
         let diff: Vec<Rgb> = (nb.iter().zip(b))
@@ -141,13 +167,41 @@ impl Sweeping {
             .collect();
         let (dn, bn) = (sys.norm(&diff), sys.norm(&bounced));
         let update = if bn > 0.0 { dn / bn } else { 0.0 };
-        let q = if self.last_update > 0.0 {
+        let observed = if self.last_update > 0.0 {
             (update / self.last_update).clamp(0.0, 0.9999)
         } else {
-            0.5
+            f64::NAN
         };
+        self.since += 1;
+        let settled = (observed - self.last_q).abs() <= 0.01 * observed;
+        self.factor = if self.extrapolation && settled && observed <= Self::MAX_Q && self.since >= 3
+        {
+            observed / (1.0 - observed)
+        } else {
+            0.0
+        };
+        self.last_q = observed;
         self.last_update = update;
+        let q = if observed.is_nan() { 0.5 } else { observed }.max(self.held_q);
         update * q / (1.0 - q)
+    }
+
+    /// Carries the sweep from `b` to `nb` on as [`Sweeping::residual`] decided, in `nb`
+    /// (radiosity kept at least 0); whether it did.
+    pub fn extrapolate(&mut self, nb: &mut [Rgb], b: &[Rgb]) -> bool {
+        if self.factor <= 0.0 || nb.len() != b.len() {
+            return false;
+        }
+        let f = self.factor;
+        nb.par_iter_mut().zip(b).for_each(|(x, y)| {
+            for c in 0..3 {
+                x[c] = (x[c] + f * (x[c] - y[c])).max(0.0);
+            }
+        });
+        self.held_q = self.held_q.max(f / (1.0 + f));
+        // The updates that follow measure what is left after it, not the mode's contraction.
+        (self.since, self.last_q, self.last_update, self.factor) = (0, f64::NAN, f64::NAN, 0.0);
+        true
     }
 }
 
@@ -690,8 +744,11 @@ impl HierSystem {
         let mut rule = Sweeping::default();
         let mut scratch = SweepScratch::default();
         for it in 1..=u64::from(max_sweeps) {
-            let nb = self.sweep_in(&b, rho, source, &mut scratch);
+            let mut nb = self.sweep_in(&b, rho, source, &mut scratch);
             let residual = rule.residual(self, &nb, &b, source);
+            if residual > tolerance {
+                rule.extrapolate(&mut nb, &b);
+            }
             b = nb;
             if residual <= tolerance && it >= 2 {
                 return Ok((b, true));
