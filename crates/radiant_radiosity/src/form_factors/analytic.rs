@@ -73,8 +73,9 @@ fn contour(n: DVec3, r: &[DVec3]) -> f64 {
 }
 
 /// `atan2(y, x)` for `y >= 0`, an angle in `[0, π]`, within a few units in the last place of
-/// `f64::atan2` (4·10⁻¹⁶ relative at most, measured) and about twice as fast: the contour integral takes one per edge, and libm's
-/// `atan2` was a fifth of the per-triangle Cornell bake. The ratio of the smaller to the larger
+/// `f64::atan2` (4·10⁻¹⁶ relative at most, measured) and about twice as fast: the contour
+/// integral takes one per edge, and libm's `atan2` was a fifth of the per-triangle Cornell
+/// bake. The ratio of the smaller to the larger
 /// of `|x|` and `y` is brought to `|z| <= tan(π/8)` around `π/4`, where `atan(z) = z P(z²)`
 /// with `P` of degree 10 fitted by least squares (`tools/fit_angle.py`: 2·10⁻¹⁶ relative).
 /// `y = x = 0` gives 0, a NaN gives NaN.
