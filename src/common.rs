@@ -95,6 +95,23 @@ impl ProgressLog {
     }
 }
 
+/// What is wrong with `RADIANT_PROGRESS_SECONDS` when it is set to something that is not a
+/// number of seconds (the default is used then, and the command warns once): `None` when it is
+/// unset or good.
+pub(crate) fn progress_seconds_problem(value: Option<&str>) -> Option<String> {
+    let v = value?;
+    let good = v
+        .trim()
+        .parse::<f64>()
+        .is_ok_and(|s| s.is_finite() && s >= 0.0);
+    (!good).then(|| {
+        format!(
+            "RADIANT_PROGRESS_SECONDS={v:?} is not a number of seconds (0 or more): \
+             progress goes to the log every {PROGRESS_SECONDS} s"
+        )
+    })
+}
+
 /// `RADIANT_PROGRESS_SECONDS`: a finite number of seconds, at least 0; anything else gives
 /// the default.
 fn parse_progress_seconds(value: Option<&str>) -> f64 {
@@ -166,6 +183,11 @@ mod tests {
         assert_eq!(parse_progress_seconds(Some("0")), 0.0);
         for bad in ["-1", "nan", "inf", "soon", ""] {
             assert_eq!(parse_progress_seconds(Some(bad)), PROGRESS_SECONDS, "{bad}");
+            let problem = progress_seconds_problem(Some(bad)).expect("a warning");
+            assert!(problem.contains("RADIANT_PROGRESS_SECONDS"), "{problem}");
+        }
+        for good in [None, Some("0"), Some(" 30 "), Some("2.5")] {
+            assert_eq!(progress_seconds_problem(good), None, "{good:?}");
         }
         let every = ProgressLog::every(0.0);
         assert!(every.due() && every.due());

@@ -367,6 +367,10 @@ fn main() -> ExitCode {
         .with_ansi(stderr_is_terminal)
         .with_writer(std::io::stderr)
         .init();
+    let progress_seconds = std::env::var("RADIANT_PROGRESS_SECONDS").ok();
+    if let Some(problem) = common::progress_seconds_problem(progress_seconds.as_deref()) {
+        tracing::warn!("{problem}");
+    }
     let result = match cli.command {
         Some(Command::Bake(args)) => bake_cmd::run(&args),
         Some(Command::Converge(args)) => converge_cmd::run(&args),
