@@ -610,6 +610,114 @@ fn external_image_in_slice_import_is_a_typed_error() {
     }
 }
 
+/// A one-tile scene whose material (factor 0.5, 0.25, 0.125) reads one base-colour texture from
+/// `uri`, and the imported tile.
+fn textured_tile(uri: &str) -> (Scene, radiant::scene::Surface) {
+    let mut doc = Doc::default();
+    let m = doc.material(
+        r#"{"name":"textured","pbrMetallicRoughness":{"baseColorFactor":[0.5,0.25,0.125,1],"baseColorTexture":{"index":0}}}"#
+            .into(),
+    );
+    let (p, i) = rect_up(0.0, 1.0, 0.0, 1.0, 0.0);
+    doc.mesh_uv("tile", &p, Some(&uv_of(&p)), &i, m);
+    add_texture(&mut doc, r#""magFilter":9729"#, uri);
+    let scene = doc
+        .load()
+        .expect("a texture fault is a warning, not an error");
+    let tile = scene.surfaces[surface_index(&scene, "tile") as usize].clone();
+    (scene, tile)
+}
+
+/// An image whose declared MIME type is not what its bytes are is decoded by its bytes, with one
+/// warning that says so (a PNG labelled `image/jpeg`, and a JPEG labelled `image/png`).
+#[test]
+fn an_image_is_decoded_by_its_bytes_whatever_its_mime_type_says() {
+    let grey = vec![128u8; 4 * 4 * 4];
+    let png = png_uri(4, 4, grey.clone()).replace("data:image/png", "data:image/jpeg");
+    let mut jpeg = Cursor::new(Vec::new());
+    image::RgbImage::from_raw(4, 4, vec![128u8; 4 * 4 * 3])
+        .expect("4 × 4 RGB")
+        .write_to(&mut jpeg, image::ImageFormat::Jpeg)
+        .expect("JPEG encodes");
+    let jpeg = format!("data:image/png;base64,{}", base64(jpeg.get_ref()));
+    for (uri, is) in [(png, "image/png"), (jpeg, "image/jpeg")] {
+        let (scene, tile) = textured_tile(&uri);
+        assert!(
+            tile.base_color_texture.is_some(),
+            "{is}: the texture is kept"
+        );
+        let warnings = scene.warnings();
+        assert_eq!(warnings.len(), 1, "{is}: {warnings:?}");
+        assert!(
+            warnings[0].contains(&format!("its bytes are {is}")),
+            "{warnings:?}"
+        );
+        // Grey 128 is 0.2158 linear; JPEG may round a level either way.
+        let want = 0.5 * srgb_to_linear(128.0 / 255.0);
+        assert!(
+            (tile.reflectance[0] - want).abs() < 0.01 * want,
+            "{is}: {:?}",
+            tile.reflectance
+        );
+    }
+}
+
+/// A texture that cannot be decoded, or whose header claims more texels than the import takes,
+/// is one warning naming the image and the material that reads it; the material keeps its
+/// colour factor and the scene loads (as an engine would still draw the level).
+#[test]
+fn an_undecodable_or_oversized_texture_warns_and_keeps_the_factor() {
+    /// CRC-32 (ISO 3309, as PNG chunks carry it), bit by bit.
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut crc = !0u32;
+        for &b in bytes {
+            crc ^= u32::from(b);
+            for _ in 0..8 {
+                crc = if crc & 1 == 1 {
+                    (crc >> 1) ^ 0xEDB8_8320
+                } else {
+                    crc >> 1
+                };
+            }
+        }
+        !crc
+    }
+    fn chunk(kind: &[u8], data: &[u8]) -> Vec<u8> {
+        let mut c = (data.len() as u32).to_be_bytes().to_vec();
+        c.extend(kind);
+        c.extend(data);
+        c.extend(crc32(&c[4..]).to_be_bytes());
+        c
+    }
+    // The header of a 16384 × 16384 RGBA PNG and no texels: refused from the header, before any
+    // allocation of its 1 GiB.
+    let mut huge = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut ihdr = 16384u32.to_be_bytes().to_vec();
+    ihdr.extend(16384u32.to_be_bytes());
+    ihdr.extend([8, 6, 0, 0, 0]);
+    huge.extend(chunk(b"IHDR", &ihdr));
+    huge.extend(chunk(b"IDAT", &[]));
+    huge.extend(chunk(b"IEND", &[]));
+    let huge = format!("data:image/png;base64,{}", base64(&huge));
+    let garbage = format!("data:image/png;base64,{}", base64(b"not an image at all"));
+    let truncated = png_uri(8, 8, vec![200u8; 8 * 8 * 4]);
+    let truncated = truncated[..truncated.len() - 24].to_string();
+    for (uri, what) in [
+        (huge, "16384×16384"),
+        (garbage, "neither PNG nor JPEG"),
+        (truncated, "cannot decode"),
+    ] {
+        let (scene, tile) = textured_tile(&uri);
+        assert!(tile.base_color_texture.is_none(), "{what}");
+        assert_eq!(tile.reflectance, [0.5, 0.25, 0.125], "{what}");
+        let warnings = scene.warnings();
+        assert_eq!(warnings.len(), 1, "{what}: {warnings:?}");
+        let w = &warnings[0];
+        assert!(w.contains(what) && w.contains("material 'textured'"), "{w}");
+        assert!(w.contains("node 'tile'") && !w.contains('\n'), "{w}");
+    }
+}
+
 #[test]
 fn degenerate_triangles_are_skipped_and_reported() {
     // The floor plus a mesh whose two triangles are a good one and a collinear one.

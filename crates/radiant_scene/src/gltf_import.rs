@@ -79,13 +79,17 @@ fn load(bytes: &[u8], base: Option<&Path>) -> Result<Scene, SceneError> {
         other => SceneError::Buffer(other.to_string()),
     })?;
     check_accessors(&document, &buffers)?;
-    let (images, image_slot) = import_images(&document, base, &buffers)?;
+    let (images, image_slot, image_warnings) = import_images(&document, base, &buffers)?;
 
     let mut importer = Importer {
         buffers: &buffers,
         image_slot: &image_slot,
         scene: Scene {
             images,
+            stats: crate::ImportStats {
+                notes: image_warnings,
+                ..Default::default()
+            },
             ..Scene::default()
         },
         material_surfaces: Vec::new(),
@@ -173,13 +177,22 @@ fn is_dynamic(node: &gltf::Node) -> bool {
         .unwrap_or(false)
 }
 
+/// The decoded images, per glTF image index its slot among them (`u32::MAX` where none), and
+/// the warnings of their import.
+type ImportedImages = (Vec<Image>, Vec<u32>, Vec<String>);
+
+/// One decoded image and the warning its decoding gave, if any.
+type Decoded = (Image, Option<String>);
+
 /// Decodes the images that base-colour and emissive textures read (normal and other maps are
-/// not used), in parallel. Returns them and, per glTF image index, the slot in the scene's list.
+/// not used), in parallel. Returns them, per glTF image index the slot in the scene's list
+/// (`u32::MAX` where none), and one warning per image that was decoded with a repair or could not
+/// be read or decoded (its materials then go without it).
 fn import_images(
     document: &gltf::Document,
     base: Option<&Path>,
     buffers: &[gltf::buffer::Data],
-) -> Result<(Vec<Image>, Vec<u32>), SceneError> {
+) -> Result<ImportedImages, SceneError> {
     let mut used = vec![false; document.images().len()];
     for m in document.materials() {
         let tex = [
@@ -194,7 +207,7 @@ fn import_images(
     }
     let wanted: Vec<gltf::Image> = document.images().filter(|i| used[i.index()]).collect();
     if wanted.is_empty() {
-        return Ok((Vec::new(), vec![u32::MAX; used.len()]));
+        return Ok((Vec::new(), vec![u32::MAX; used.len()], Vec::new()));
     }
     let name_of = |i: &gltf::Image| match i.source() {
         gltf::image::Source::Uri { uri, .. } if !uri.starts_with("data:") => uri.to_string(),
@@ -221,25 +234,46 @@ fn import_images(
             Path::new("")
         }
     };
-    let decode = |image: &gltf::Image| -> Result<Image, SceneError> {
+    let decode = |image: &gltf::Image| -> Result<Decoded, SceneError> {
         let name = name_of(image);
-        let data =
-            gltf::image::Data::from_source(image.source(), Some(dir), buffers).map_err(|e| {
-                SceneError::Texture {
-                    image: name.clone(),
-                    what: match e {
-                        gltf::Error::Io(io) => format!("cannot read it: {io}"),
-                        gltf::Error::Image(im) => format!("cannot decode it: {im}"),
-                        other => other.to_string(),
-                    },
-                }
-            })?;
-        to_rgba8(&name, &data)
+        let fail = |what: String| SceneError::Texture {
+            image: name.clone(),
+            what: format!("{what} (read by {})", image_users(document, image.index())),
+        };
+        let (bytes, declared): (std::borrow::Cow<[u8]>, Option<&str>) = match image.source() {
+            gltf::image::Source::View { view, mime_type } => {
+                let buffer = buffers
+                    .get(view.buffer().index())
+                    .ok_or_else(|| fail("its buffer is missing".into()))?;
+                let end = view.offset().saturating_add(view.length());
+                let bytes = buffer
+                    .get(view.offset()..end)
+                    .ok_or_else(|| fail("its buffer view lies outside the buffer".into()))?;
+                (bytes.into(), Some(mime_type))
+            }
+            gltf::image::Source::Uri { uri, mime_type } => {
+                let data =
+                    gltf::buffer::Data::from_source(gltf::buffer::Source::Uri(uri), Some(dir))
+                        .map_err(|e| {
+                            fail(match e {
+                                gltf::Error::Io(io) => format!("cannot read it: {io}"),
+                                other => other.to_string(),
+                            })
+                        })?;
+                let declared = mime_type.or_else(|| {
+                    uri.strip_prefix("data:")
+                        .and_then(|r| r.split(';').next())
+                        .filter(|m| !m.is_empty())
+                });
+                (data.0.into(), declared)
+            }
+        };
+        Image::decode(&name, &bytes, declared).map_err(|e| fail(e.to_string()))
     };
     let threads = std::thread::available_parallelism()
         .map_or(1, |n| n.get())
         .min(wanted.len());
-    let mut decoded: Vec<Option<Result<Image, SceneError>>> = Vec::new();
+    let mut decoded: Vec<Option<Result<Decoded, SceneError>>> = Vec::new();
     decoded.resize_with(wanted.len(), || None);
     std::thread::scope(|scope| {
         let chunk = wanted.len().div_ceil(threads);
@@ -254,6 +288,7 @@ fn import_images(
     });
     let mut slot = vec![u32::MAX; used.len()];
     let mut images = Vec::with_capacity(wanted.len());
+    let mut warnings = Vec::new();
     for (image, result) in wanted.iter().zip(decoded) {
         let result = result.unwrap_or_else(|| {
             Err(SceneError::Texture {
@@ -261,70 +296,63 @@ fn import_images(
                 what: "its decoder thread stopped".into(),
             })
         });
-        slot[image.index()] = images.len() as u32;
-        images.push(result?);
+        // A texture that cannot be read or decoded is one warning, naming the file and the
+        // materials that read it; those materials keep their factors, as an engine would
+        // draw them, and the bake goes on.
+        match result {
+            Ok((decoded, warning)) => {
+                warnings.extend(warning);
+                slot[image.index()] = images.len() as u32;
+                images.push(decoded);
+            }
+            Err(e) => warnings.push(format!(
+                "{e}; its materials use their colour factors without it"
+            )),
+        }
     }
-    Ok((images, slot))
+    Ok((images, slot, warnings))
 }
 
-/// Any decoded glTF image as 8-bit RGBA (16-bit and float channels scaled, grey replicated).
-fn to_rgba8(name: &str, img: &gltf::image::Data) -> Result<Image, SceneError> {
-    use gltf::image::Format;
-    let (channels, bytes) = match img.format {
-        Format::R8 => (1, 1),
-        Format::R8G8 => (2, 1),
-        Format::R8G8B8 => (3, 1),
-        Format::R8G8B8A8 => (4, 1),
-        Format::R16 => (1, 2),
-        Format::R16G16 => (2, 2),
-        Format::R16G16B16 => (3, 2),
-        Format::R16G16B16A16 => (4, 2),
-        Format::R32G32B32FLOAT => (3, 4),
-        Format::R32G32B32A32FLOAT => (4, 4),
+/// Where an image is read: its materials, and the first node and primitive that uses each.
+fn image_users(document: &gltf::Document, image: usize) -> String {
+    let reads = |m: &gltf::Material| {
+        [
+            m.pbr_metallic_roughness()
+                .base_color_texture()
+                .map(|t| t.texture()),
+            m.emissive_texture().map(|t| t.texture()),
+        ]
+        .into_iter()
+        .flatten()
+        .any(|t| t.source().index() == image)
     };
-    let texels = img.width as usize * img.height as usize;
-    if img.pixels.len() < texels * channels * bytes || texels == 0 {
-        return Err(SceneError::Texture {
-            image: name.to_string(),
-            what: format!(
-                "{}×{} texels but {} bytes",
-                img.width,
-                img.height,
-                img.pixels.len()
-            ),
+    let mut out = Vec::new();
+    for m in document.materials().filter(reads) {
+        let material = m.name().map_or_else(
+            || format!("material {}", m.index().unwrap_or(0)),
+            |n| format!("material '{n}'"),
+        );
+        let first = document.nodes().find_map(|n| {
+            let mesh = n.mesh()?;
+            let k = mesh
+                .primitives()
+                .position(|p| p.material().index() == m.index())?;
+            Some(format!(
+                "node '{}' primitive {k}",
+                n.name()
+                    .map_or_else(|| n.index().to_string(), str::to_string)
+            ))
+        });
+        out.push(match first {
+            Some(at) => format!("{material} on {at}"),
+            None => material,
         });
     }
-    let read = |k: usize| -> u8 {
-        let at = k * bytes;
-        match bytes {
-            1 => img.pixels[at],
-            2 => img.pixels[at + 1], // little-endian: the high byte
-            _ => {
-                let v = f32::from_le_bytes([
-                    img.pixels[at],
-                    img.pixels[at + 1],
-                    img.pixels[at + 2],
-                    img.pixels[at + 3],
-                ]);
-                (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
-            }
-        }
-    };
-    let mut out = Vec::with_capacity(texels * 4);
-    for p in 0..texels {
-        let k = p * channels;
-        let px = match channels {
-            1 => [read(k), read(k), read(k), 255],
-            2 => [read(k), read(k), read(k), read(k + 1)],
-            3 => [read(k), read(k + 1), read(k + 2), 255],
-            _ => [read(k), read(k + 1), read(k + 2), read(k + 3)],
-        };
-        out.extend(px);
+    if out.is_empty() {
+        "no material".into()
+    } else {
+        out.join(", ")
     }
-    Image::new(name, img.width, img.height, out).ok_or_else(|| SceneError::Texture {
-        image: name.to_string(),
-        what: "size does not match its texels".into(),
-    })
 }
 
 /// gltf-json's validation indexes the accessor array with each primitive's POSITION index
@@ -481,18 +509,19 @@ impl Importer<'_> {
         &self,
         material: &str,
         info: &gltf::texture::Info,
-    ) -> Result<TextureRef, SceneError> {
+    ) -> Result<Option<TextureRef>, SceneError> {
         use gltf::texture::{MagFilter, WrappingMode};
         let tex = info.texture();
-        let image = self
+        // An image that could not be read or decoded was warned about once, by name: the
+        // material goes without it.
+        let Some(image) = self
             .image_slot
             .get(tex.source().index())
             .copied()
             .filter(|&s| s != u32::MAX)
-            .ok_or_else(|| SceneError::Texture {
-                image: format!("image {}", tex.source().index()),
-                what: format!("material '{material}' reads it, but it was not decoded"),
-            })?;
+        else {
+            return Ok(None);
+        };
         let wrap = |w: WrappingMode| match w {
             WrappingMode::Repeat => Wrap::Repeat,
             WrappingMode::MirroredRepeat => Wrap::MirroredRepeat,
@@ -525,7 +554,7 @@ impl Importer<'_> {
                 "material '{material}': KHR_texture_transform is not finite"
             )));
         }
-        Ok(TextureRef {
+        Ok(Some(TextureRef {
             image,
             sampler: Sampler {
                 wrap_s: wrap(sampler.wrap_s()),
@@ -534,7 +563,7 @@ impl Importer<'_> {
             },
             tex_coord: tex_coord as u8,
             transform,
-        })
+        }))
     }
 
     fn material(&mut self, m: &gltf::Material) -> Result<MaterialValues, SceneError> {
@@ -561,7 +590,7 @@ impl Importer<'_> {
             }
         }
         let base_color_texture = match pbr.base_color_texture() {
-            Some(info) => Some(self.texture(&name, &info)?),
+            Some(info) => self.texture(&name, &info)?,
             None => None,
         };
         if let Some(t) = base_color_texture {
@@ -582,7 +611,7 @@ impl Importer<'_> {
             }
         }
         let emissive_texture = match m.emissive_texture() {
-            Some(info) => Some(self.texture(&name, &info)?),
+            Some(info) => self.texture(&name, &info)?,
             None => None,
         };
         if let Some(t) = emissive_texture {

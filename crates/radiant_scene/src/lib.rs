@@ -396,6 +396,9 @@ pub struct ImportStats {
     pub degenerate_triangles: usize,
     /// Primitives that are not triangles (points, lines) and were skipped.
     pub skipped_primitives: usize,
+    /// Other input that was read with a repair, one line each (e.g. an image whose declared MIME
+    /// type is not what its bytes are).
+    pub notes: Vec<String>,
 }
 
 /// A scene ready for baking.
@@ -462,6 +465,7 @@ impl Scene {
                 self.stats.skipped_primitives
             ));
         }
+        w.extend(self.stats.notes.iter().cloned());
         w
     }
 

@@ -29,6 +29,30 @@ pub struct Image {
     pub pixels: Arc<[u8]>,
 }
 
+/// Why an encoded image could not be decoded.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ImageError {
+    /// The bytes start like neither a PNG nor a JPEG file.
+    #[error("neither PNG nor JPEG (declared {})", declared.as_deref().unwrap_or("no MIME type"))]
+    NotPngOrJpeg {
+        /// The MIME type the glTF declared, if any.
+        declared: Option<String>,
+    },
+    /// Truncated or corrupt data, as the decoder reports it.
+    #[error("cannot decode it: {0}")]
+    Corrupt(String),
+    /// More texels than [`Image::MAX_TEXELS`].
+    #[error(
+        "{width}×{height} texels is over the limit of 8192×8192; scale it down (e.g. `convert in.png -resize 8192x8192 out.png`)"
+    )]
+    TooLarge {
+        /// Width in texels, from the header.
+        width: u32,
+        /// Height in texels, from the header.
+        height: u32,
+    },
+}
+
 impl std::fmt::Debug for Image {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "Image({:?}, {}×{})", self.name, self.width, self.height)
@@ -45,6 +69,57 @@ impl Image {
                 height,
                 pixels: pixels.into(),
             })
+    }
+
+    /// The most texels an imported image may have: 8192 × 8192 (256 MiB as RGBA8). Larger images
+    /// are refused before they are decoded, so a 16k × 16k texture cannot take the memory of a
+    /// bake.
+    pub const MAX_TEXELS: u64 = 8192 * 8192;
+
+    /// Decodes an encoded PNG or JPEG image to 8-bit RGBA (16-bit channels rounded, grey
+    /// replicated). The container is recognised by its first bytes; `declared` is the MIME type
+    /// the file gives, and a mismatch is returned as a warning (the image is decoded as what it
+    /// is). Images over [`Image::MAX_TEXELS`] are refused from their header, before decoding.
+    ///
+    /// # Errors
+    /// [`ImageError`] when the bytes are neither PNG nor JPEG, are truncated or corrupt, or are too
+    /// large.
+    pub fn decode(
+        name: &str,
+        bytes: &[u8],
+        declared: Option<&str>,
+    ) -> Result<(Image, Option<String>), ImageError> {
+        use image::ImageFormat;
+        let (format, mime) = if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
+            (ImageFormat::Png, "image/png")
+        } else if bytes.starts_with(&[0xFF, 0xD8, 0xFF]) {
+            (ImageFormat::Jpeg, "image/jpeg")
+        } else {
+            return Err(ImageError::NotPngOrJpeg {
+                declared: declared.map(str::to_string),
+            });
+        };
+        let warning = declared.filter(|d| *d != mime).map(|d| {
+            format!("image '{name}': declared {d:?} but its bytes are {mime}; decoded as {mime}")
+        });
+        let reader = || {
+            let mut r = image::ImageReader::with_format(std::io::Cursor::new(bytes), format);
+            let mut limits = image::Limits::default();
+            limits.max_alloc = Some(Self::MAX_TEXELS * 8 + (64 << 20));
+            r.limits(limits);
+            r
+        };
+        let corrupt = |e: image::ImageError| ImageError::Corrupt(e.to_string());
+        let (width, height) = reader().into_dimensions().map_err(corrupt)?;
+        if u64::from(width) * u64::from(height) > Self::MAX_TEXELS {
+            return Err(ImageError::TooLarge { width, height });
+        }
+        let decoded = reader().decode().map_err(corrupt)?;
+        let rgba = decoded.into_rgba8();
+        let (width, height) = rgba.dimensions();
+        let image = Image::new(name, width, height, rgba.into_raw())
+            .ok_or_else(|| ImageError::Corrupt(format!("{width}×{height} texels")))?;
+        Ok((image, warning))
     }
 
     /// The mean linear RGB and alpha of all texels (colour decoded from sRGB).
