@@ -89,6 +89,8 @@ struct Job {
     reference: Option<NamedReference>,
     shipped: Option<ShippedReferences>,
     atlas: Atlas,
+    /// `--points` (located) and `--reference-points`.
+    points: Option<crate::points::AskedPoints>,
     start: Instant,
     import_s: f64,
     atlas_s: f64,
@@ -112,7 +114,13 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     let solver = match args.method {
         Method::Solver(s) => s,
         #[cfg(feature = "render")]
-        Method::GpuHemicube => return crate::gather_cmd::bake(args),
+        Method::GpuHemicube => {
+            anyhow::ensure!(
+                args.points.is_none(),
+                "--points is not available with --method gpu-hemicube yet; bake with jacobi or gauss-seidel"
+            );
+            return crate::gather_cmd::bake(args);
+        }
         #[cfg(not(feature = "render"))]
         Method::GpuHemicube => anyhow::bail!(
             "--method gpu-hemicube needs a build with the `render` feature (wgpu); use jacobi, gauss-seidel, southwell or direct"
@@ -151,8 +159,21 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         None => serde_json::Value::Null,
     };
     let written = write_outputs(args, &job, &result)?;
+    let asked = match &job.points {
+        Some(p) => Some(crate::points::write(
+            p,
+            &job.scene,
+            &job.atlas,
+            &written.map,
+            &args.out,
+        )?),
+        None => None,
+    };
     let total_s = job.start.elapsed().as_secs_f64();
     let mut report = report_json(args, &job, &result, &written, error.as_ref(), total_s);
+    if let Some(p) = &asked {
+        report["points"] = p.json().clone();
+    }
     if !spectral.is_null() {
         report["spectral"] = spectral;
     }
@@ -172,6 +193,12 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         points.as_ref(),
         error.as_ref(),
     );
+    if let Some(p) = &asked {
+        println!("wrote {}/points.csv", args.out.display());
+        if let Some(line) = p.summary() {
+            println!("{line}");
+        }
+    }
     Ok(())
 }
 
@@ -197,6 +224,14 @@ fn prepare(args: &BakeArgs, solver: SolverKind) -> anyhow::Result<Job> {
             .any(|s| !s.is_emitter() && rows.iter().any(|(n, _)| *n == s.name));
         anyhow::ensure!(known, "reference {name} names none of the scene's surfaces");
     }
+    let points = match &args.points {
+        Some(p) => Some(crate::points::read(
+            &scene,
+            p,
+            args.reference_points.as_deref(),
+        )?),
+        None => None,
+    };
     ensure_dir(&args.out)?;
     let lap = Instant::now();
     let atlas = Atlas::paged(&scene, args.texel_density, args.lightmap_page)?;
@@ -218,6 +253,7 @@ fn prepare(args: &BakeArgs, solver: SolverKind) -> anyhow::Result<Job> {
         reference,
         shipped: args.scene.shipped(),
         atlas,
+        points,
         start,
         import_s,
         atlas_s,

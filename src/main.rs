@@ -9,6 +9,7 @@ mod converge_cmd;
 mod gather_cmd;
 mod output;
 mod plot;
+mod points;
 mod reference_cmd;
 #[cfg(feature = "render")]
 mod render_cmd;
@@ -157,6 +158,16 @@ pub(crate) struct BakeArgs {
     /// (`lightmap`: texture, texCoord, scale, encoding).
     #[arg(long)]
     pub(crate) export: Option<PathBuf>,
+    /// Surface points (the CSV `radiant reference --points` reads: name, x,y,z in scene units or
+    /// x_mm,y_mm,z_mm, nx,ny,nz): writes points.csv with what the renderer shows there, the
+    /// light map H as the GPU samples it and L = albedo × H + emission.
+    #[arg(long, value_name = "FILE.csv")]
+    pub(crate) points: Option<PathBuf>,
+    /// A points.csv written by `radiant reference --points` (or Mitsuba's point meters) to
+    /// measure --points against, by point name: median, mean and worst relative error and the
+    /// bias in report.json and the summary.
+    #[arg(long, value_name = "REF.csv", requires = "points")]
+    pub(crate) reference_points: Option<PathBuf>,
     /// Light-map texels per scene unit (metres for glTF); default: automatic (about 256
     /// texels per triangle, 8 M at most; Sponza gets 18 per metre). Lowered where the charts
     /// would not fit one 8192² page.

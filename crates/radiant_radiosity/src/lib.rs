@@ -34,6 +34,7 @@ pub mod links;
 pub mod mesh;
 pub mod metrics;
 pub mod params;
+pub mod points;
 pub mod report;
 pub mod rng;
 pub mod scenes;

@@ -24,6 +24,45 @@ pub struct LightMap {
     pub texels: Vec<[f32; 3]>,
 }
 
+impl LightMap {
+    /// `H` at light-map coordinates `uv` (in [0, 1], texel `(x, y)` centred at
+    /// `((x + ½)/width, (y + ½)/height)`) on `page`, filtered as the renderer's sampler filters
+    /// it: bilinear between the four nearest texel centres, clamped to the page's edge. Black
+    /// for a page the map lacks or coordinates that are not finite.
+    pub fn sample(&self, page: u32, uv: [f64; 2]) -> [f64; 3] {
+        let (w, h) = (self.width as usize, self.height as usize);
+        if page >= self.pages || w == 0 || h == 0 || !uv.iter().all(|c| c.is_finite()) {
+            return [0.0; 3];
+        }
+        let base = page as usize * w * h;
+        let axis = |c: f64, n: usize| {
+            let x = (c * n as f64 - 0.5).clamp(-1.0, n as f64);
+            let x0 = x.floor();
+            let i = |k: f64| (k.max(0.0) as usize).min(n - 1);
+            (i(x0), i(x0 + 1.0), x - x0)
+        };
+        let (x0, x1, fx) = axis(uv[0], w);
+        let (y0, y1, fy) = axis(uv[1], h);
+        let mut out = [0.0; 3];
+        for (x, y, weight) in [
+            (x0, y0, (1.0 - fx) * (1.0 - fy)),
+            (x1, y0, fx * (1.0 - fy)),
+            (x0, y1, (1.0 - fx) * fy),
+            (x1, y1, fx * fy),
+        ] {
+            let t = self
+                .texels
+                .get(base + y * w + x)
+                .copied()
+                .unwrap_or_default();
+            for c in 0..3 {
+                out[c] += weight * f64::from(t[c]);
+            }
+        }
+        out
+    }
+}
+
 /// Per scene triangle, the bake's input triangle (the bake meshes the static part only), or
 /// `None` for a triangle of a dynamic surface.
 pub fn static_roots(scene: &Scene) -> Vec<Option<u32>> {

@@ -405,21 +405,65 @@ pub struct PointReference {
     pub radiosity: Rgb,
 }
 
-/// Parses a `point,x_mm,y_mm,z_mm,nx,ny,nz,L_r,L_g,L_b,...` CSV; positions are multiplied by
-/// `mm_to_scene` (1e-3 for a scene in metres).
+/// A point where a value is asked for: a surface point and the normal it is seen along.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointSpec {
+    /// The point's name (the first column).
+    pub name: String,
+    /// Position on the surface, scene units.
+    pub position: glam::DVec3,
+    /// Unit normal of the surface there.
+    pub normal: glam::DVec3,
+}
+
+/// Parses a points CSV: a first column naming each point, then either `x,y,z` (scene units) or
+/// `x_mm,y_mm,z_mm` (millimetres, multiplied by `mm_to_scene`: 1e-3 for a scene in metres),
+/// and `nx,ny,nz` (any length but 0). Other columns are ignored. The layout `radiant reference
+/// --points` reads, and the one it and Mitsuba's meters write.
+pub fn parse_point_positions(text: &str, mm_to_scene: f64) -> Result<Vec<PointSpec>, BakeError> {
+    Ok(parse_points(text, mm_to_scene, &[])?
+        .into_iter()
+        .map(|(spec, _)| spec)
+        .collect())
+}
+
+/// Parses a `point,x,y,z,nx,ny,nz,L_r,L_g,L_b,...` CSV (or `x_mm,y_mm,z_mm`, multiplied by
+/// `mm_to_scene`, see [`parse_point_positions`]): a path-traced outgoing radiance per point,
+/// as `radiant reference --points` and Mitsuba's radiance meters write it.
 pub fn parse_point_csv(text: &str, mm_to_scene: f64) -> Result<Vec<PointReference>, BakeError> {
-    let (header, lines) = csv_lines(text, "point reference")?;
-    let want = [
-        "x_mm", "y_mm", "z_mm", "nx", "ny", "nz", "L_r", "L_g", "L_b",
-    ];
-    let cols: Vec<usize> = want
-        .iter()
-        .map(|w| {
-            header
-                .iter()
-                .position(|h| h == w)
-                .ok_or(ReferenceFileError::NoColumn { column: w })
+    Ok(parse_points(text, mm_to_scene, &["L_r", "L_g", "L_b"])?
+        .into_iter()
+        .map(|(p, l)| PointReference {
+            name: p.name,
+            position: p.position,
+            normal: p.normal,
+            radiosity: [l[0], l[1], l[2]],
         })
+        .collect())
+}
+
+/// The rows of a points CSV with the numbers of the `extra` columns.
+fn parse_points(
+    text: &str,
+    mm_to_scene: f64,
+    extra: &[&'static str],
+) -> Result<Vec<(PointSpec, Vec<f64>)>, BakeError> {
+    let (header, lines) = csv_lines(text, "point file")?;
+    let column = |w: &'static str| {
+        header
+            .iter()
+            .position(|h| *h == w)
+            .ok_or(ReferenceFileError::NoColumn { column: w })
+    };
+    let (xyz, scale) = match header.contains(&"x") {
+        true => (["x", "y", "z"], 1.0),
+        false => (["x_mm", "y_mm", "z_mm"], mm_to_scene),
+    };
+    let cols: Vec<usize> = xyz
+        .iter()
+        .chain(&["nx", "ny", "nz"])
+        .chain(extra)
+        .map(|w| column(w))
         .collect::<Result<_, _>>()?;
     let mut out = Vec::new();
     for (k, line) in lines.enumerate() {
@@ -439,12 +483,15 @@ pub fn parse_point_csv(text: &str, mm_to_scene: f64) -> Result<Vec<PointReferenc
         let normal = glam::DVec3::new(v[3], v[4], v[5])
             .try_normalize()
             .ok_or(ReferenceFileError::ZeroNormal { row: k + 2 })?;
-        out.push(PointReference {
+        let spec = PointSpec {
             name: f.first().copied().unwrap_or_default().to_string(),
-            position: glam::DVec3::new(v[0], v[1], v[2]) * mm_to_scene,
+            position: glam::DVec3::new(v[0], v[1], v[2]) * scale,
             normal,
-            radiosity: [v[6], v[7], v[8]],
-        });
+        };
+        out.push((spec, v[6..].to_vec()));
+    }
+    if out.is_empty() {
+        return Err(ReferenceFileError::NoRows.into());
     }
     Ok(out)
 }
@@ -488,6 +535,8 @@ pub struct PointError {
     pub reference: Rgb,
     /// `Σ_c |ours − ref| / Σ_c ref`.
     pub rel: f64,
+    /// `Σ_c (ours − ref) / Σ_c ref`: below 0 where ours is darker.
+    pub signed: f64,
 }
 
 /// Radiosity at reference points against a path tracer.
@@ -499,6 +548,11 @@ pub struct PointComparison {
     pub mean_rel: f64,
     /// Largest `rel`.
     pub max_rel: f64,
+    /// Median of `rel` (the mean of the middle two for an even count).
+    pub median_rel: f64,
+    /// Mean signed error, `Σ_c (ours − ref) / Σ_c ref` averaged over the points: below 0 where
+    /// ours is darker.
+    pub bias: f64,
     /// The factor the reference was multiplied by (1 unless normalised).
     pub scale: f64,
 }
@@ -568,15 +622,29 @@ pub fn compare_points_with(
             ours,
             reference,
             rel: if sum > 0.0 { diff / sum } else { f64::INFINITY },
+            signed: if sum > 0.0 {
+                (ours.iter().sum::<f64>() - sum) / sum
+            } else {
+                f64::INFINITY
+            },
         });
     }
     if points.is_empty() {
         return Err(ReferenceFileError::NoPoints.into());
     }
     let n = points.len() as f64;
+    let mut sorted: Vec<f64> = points.iter().map(|p| p.rel).collect();
+    sorted.sort_by(f64::total_cmp);
+    let half = sorted.len() / 2;
+    let median_rel = match sorted.len() % 2 {
+        1 => sorted[half],
+        _ => 0.5 * (sorted[half - 1] + sorted[half]),
+    };
     Ok(PointComparison {
         mean_rel: points.iter().map(|p| p.rel).sum::<f64>() / n,
         max_rel: points.iter().map(|p| p.rel).fold(0.0, f64::max),
+        median_rel,
+        bias: points.iter().map(|p| p.signed).sum::<f64>() / n,
         scale,
         points,
     })

@@ -1,0 +1,325 @@
+//! What the renderer shows at chosen surface points: the light map sampled there as the GPU
+//! samples it (`H`), and the outgoing radiance `L = ρ(x) H + E(x)` with the albedo and emission
+//! at the point itself, textures included. `L` is the quantity `radiant reference --points`
+//! path-traces, so the two compare point by point (`radiant bake --points`).
+//!
+//! A point is found on the scene as the path tracer finds it: the nearest surface a short ray
+//! from 5 mm above the point, back along its normal, meets within 10 mm; front faces, or back
+//! faces of double-sided surfaces. The point is then projected onto that triangle's plane.
+
+use std::collections::HashMap;
+
+use glam::{DVec3, Vec2};
+use radiant_scene::atlas::Atlas;
+use radiant_scene::texture::{TextureRef, barycentric};
+use radiant_scene::{Scene, Triangle};
+use rayon::prelude::*;
+
+use crate::lightmap::{LightMap, static_roots};
+use crate::metrics::PointSpec;
+use crate::system::Rgb;
+
+/// How far above a point (along its normal) the locating ray starts, and half the distance it
+/// searches: the reference path tracer's lift, so both find the same triangle.
+pub const LIFT: f64 = 5e-3;
+
+/// What the renderer shows at one point.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShownPoint {
+    /// The scene triangle the point lies on.
+    pub triangle: u32,
+    /// The point projected onto that triangle's plane.
+    pub position: DVec3,
+    /// The light map's value there (incident radiance, emissive units), bilinear as the
+    /// renderer samples it.
+    pub h: Rgb,
+    /// Outgoing radiance: `H` times the albedo at the point plus its emission.
+    pub l: Rgb,
+}
+
+/// Why a point has no value.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum PointError {
+    /// No light-mapped surface facing the point's normal within [`LIFT`] of it.
+    #[error(
+        "point {index} ('{name}') lies on no light-mapped surface that faces its normal (searched 5 mm either side along the normal)"
+    )]
+    OffSurface {
+        /// Row of the point (0-based).
+        index: usize,
+        /// Its name.
+        name: String,
+    },
+    /// The atlas is not the scene's (another triangle count), or a point's triangle is not in
+    /// the scene.
+    #[error("the atlas has {atlas} triangles but the scene {scene}")]
+    AtlasMismatch {
+        /// Triangles in the atlas.
+        atlas: usize,
+        /// Triangles in the scene.
+        scene: usize,
+    },
+}
+
+/// The light-mapped (static) triangle a point lies on and the point projected onto its plane,
+/// as `radiant reference` locates it (see the module); `None` where there is none.
+pub fn locate(scene: &Scene, position: DVec3, normal: DVec3) -> Option<(u32, DVec3)> {
+    locate_among(scene, &static_roots(scene), position, normal)
+}
+
+/// [`locate`] among the triangles `roots` (from [`static_roots`]) marks as static.
+fn locate_among(
+    scene: &Scene,
+    roots: &[Option<u32>],
+    position: DVec3,
+    normal: DVec3,
+) -> Option<(u32, DVec3)> {
+    let n = normal.try_normalize()?;
+    if !position.is_finite() {
+        return None;
+    }
+    let origin = position + n * LIFT;
+    let mut best: Option<(f64, u32)> = None;
+    for (i, t) in scene.triangles.iter().enumerate() {
+        if roots.get(i).is_none_or(Option::is_none) {
+            continue;
+        }
+        let Some((dist, front)) = hit(t, origin, -n) else {
+            continue;
+        };
+        let double_sided = scene
+            .surfaces
+            .get(t.surface as usize)
+            .is_some_and(|s| s.double_sided);
+        if dist <= 2.0 * LIFT && (front || double_sided) && best.is_none_or(|(d, _)| dist < d) {
+            best = Some((dist, i as u32));
+        }
+    }
+    let (_, i) = best?;
+    let t = &scene.triangles[i as usize];
+    let normal = t.cross().normalize();
+    Some((
+        i,
+        position - normal * (position - t.vertices[0]).dot(normal),
+    ))
+}
+
+/// Distance along `dir` from `origin` to triangle `t`, and whether it is met from the front
+/// (Möller–Trumbore in f64, edges included).
+fn hit(t: &Triangle, origin: DVec3, dir: DVec3) -> Option<(f64, bool)> {
+    let [a, b, c] = t.vertices;
+    let (e1, e2) = (b - a, c - a);
+    let p = dir.cross(e2);
+    let det = e1.dot(p);
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let s = origin - a;
+    let u = s.dot(p) * inv;
+    let q = s.cross(e1);
+    let v = dir.dot(q) * inv;
+    let eps = 1e-9;
+    if u < -eps || v < -eps || u + v > 1.0 + eps {
+        return None;
+    }
+    let dist = e2.dot(q) * inv;
+    // det = −dir · (e1 × e2): positive where the ray meets the counter-clockwise (front) side.
+    (dist >= 0.0).then_some((dist, det > 0.0))
+}
+
+/// Each of `points` located on `scene` (see [`locate`]): its triangle and the point on it.
+///
+/// # Errors
+/// [`PointError::OffSurface`] for the first point on no light-mapped surface.
+pub fn locate_all(scene: &Scene, points: &[PointSpec]) -> Result<Vec<(u32, DVec3)>, PointError> {
+    let roots = static_roots(scene);
+    points
+        .par_iter()
+        .enumerate()
+        .map(|(index, p)| {
+            locate_among(scene, &roots, p.position, p.normal).ok_or_else(|| {
+                PointError::OffSurface {
+                    index,
+                    name: p.name.clone(),
+                }
+            })
+        })
+        .collect()
+}
+
+/// What the renderer shows at each `located` point (from [`locate_all`]) of `scene`, whose
+/// light map `map` lies on `atlas`.
+///
+/// # Errors
+/// [`PointError::AtlasMismatch`] when `atlas` is not `scene`'s.
+pub fn shown_at(
+    scene: &Scene,
+    atlas: &Atlas,
+    map: &LightMap,
+    located: &[(u32, DVec3)],
+) -> Result<Vec<ShownPoint>, PointError> {
+    if atlas.uv.len() != scene.triangles.len()
+        || located
+            .iter()
+            .any(|&(i, _)| i as usize >= scene.triangles.len())
+    {
+        return Err(PointError::AtlasMismatch {
+            atlas: atlas.uv.len(),
+            scene: scene.triangles.len(),
+        });
+    }
+    // The texture means the albedo is modulated by (the surface's reflectance is its factor
+    // times that mean, as the reference path tracer reads it).
+    let mut means: HashMap<u32, [f64; 4]> = HashMap::new();
+    for &(i, _) in located {
+        let s = &scene.surfaces[scene.triangles[i as usize].surface as usize];
+        for t in [s.base_color_texture, s.emissive_texture]
+            .into_iter()
+            .flatten()
+        {
+            if let Some(image) = scene.images.get(t.image as usize) {
+                means.entry(t.image).or_insert_with(|| image.mean_linear());
+            }
+        }
+    }
+    Ok(located
+        .iter()
+        .map(|&(i, x)| {
+            let t = &scene.triangles[i as usize];
+            let s = &scene.surfaces[t.surface as usize];
+            let b = barycentric(t.vertices, x);
+            let uv = atlas.uv[i as usize];
+            let at = |k: usize| {
+                f64::from(uv[0][k]) * b[0] + f64::from(uv[1][k]) * b[1] + f64::from(uv[2][k]) * b[2]
+            };
+            let page = atlas.page.get(i as usize).copied().unwrap_or(0);
+            let h = map.sample(page, [at(0), at(1)]);
+            let raw: [Vec2; 2] = std::array::from_fn(|set| {
+                let u = t.uv[set];
+                (u[0].as_dvec2() * b[0] + u[1].as_dvec2() * b[1] + u[2].as_dvec2() * b[2]).as_vec2()
+            });
+            let modulation = |texture: Option<TextureRef>| -> [f64; 3] {
+                let Some(tex) = texture else {
+                    return [1.0; 3];
+                };
+                let Some(mean) = means.get(&tex.image) else {
+                    return [1.0; 3];
+                };
+                let texel = tex.sample_linear(&scene.images, tex.uv(raw));
+                std::array::from_fn(|c| {
+                    if mean[c] > 0.0 {
+                        f64::from(texel[c]) / mean[c]
+                    } else {
+                        1.0
+                    }
+                })
+            };
+            let (kr, ke) = (
+                modulation(s.base_color_texture),
+                modulation(s.emissive_texture),
+            );
+            let l = std::array::from_fn(|c| {
+                (s.reflectance[c] * kr[c]).clamp(0.0, 1.0) * h[c] + s.emission[c] * ke[c]
+            });
+            ShownPoint {
+                triangle: i,
+                position: x,
+                h,
+                l,
+            }
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use radiant_scene::Surface;
+
+    fn quad_scene(double_sided: bool) -> Scene {
+        let v = |x: f64, z: f64| DVec3::new(x, 0.0, z);
+        let mut scene = Scene::default();
+        scene.surfaces.push(Surface {
+            name: "floor".into(),
+            reflectance: [0.5, 0.25, 0.125],
+            double_sided,
+            ..Surface::default()
+        });
+        // Counter-clockwise seen from +y.
+        scene
+            .triangles
+            .push(Triangle::new([v(0.0, 0.0), v(0.0, 1.0), v(1.0, 1.0)], 0));
+        scene
+            .triangles
+            .push(Triangle::new([v(0.0, 0.0), v(1.0, 1.0), v(1.0, 0.0)], 0));
+        scene
+    }
+
+    #[test]
+    fn a_point_is_found_on_the_face_it_looks_at() {
+        let scene = quad_scene(false);
+        let up = DVec3::Y;
+        let (t, x) = locate(&scene, DVec3::new(0.25, 0.004, 0.75), up).expect("on the floor");
+        assert_eq!(t, 0);
+        assert_eq!(x, DVec3::new(0.25, 0.0, 0.75));
+        assert_eq!(
+            locate(&scene, DVec3::new(0.75, -0.003, 0.25), up).map(|h| h.0),
+            Some(1)
+        );
+        // Too far off, outside, or looking at its back.
+        assert_eq!(locate(&scene, DVec3::new(0.25, 0.02, 0.75), up), None);
+        assert_eq!(locate(&scene, DVec3::new(1.5, 0.0, 0.5), up), None);
+        assert_eq!(locate(&scene, DVec3::new(0.25, 0.0, 0.75), -up), None);
+        assert_eq!(locate(&scene, DVec3::new(f64::NAN, 0.0, 0.5), up), None);
+        assert!(locate(&quad_scene(true), DVec3::new(0.25, 0.0, 0.75), -up).is_some());
+    }
+
+    #[test]
+    fn the_light_map_is_sampled_bilinearly_and_clamped_at_its_edge() {
+        // 2 × 1 texels: 0 and 1 in red.
+        let map = LightMap {
+            width: 2,
+            height: 1,
+            pages: 1,
+            texels: vec![[0.0, 2.0, 0.0], [1.0, 2.0, 0.0]],
+        };
+        assert_eq!(map.sample(0, [0.25, 0.5]), [0.0, 2.0, 0.0]);
+        assert_eq!(map.sample(0, [0.5, 0.5]), [0.5, 2.0, 0.0]);
+        assert_eq!(map.sample(0, [0.625, 0.5]), [0.75, 2.0, 0.0]);
+        assert_eq!(map.sample(0, [0.0, 0.0]), [0.0, 2.0, 0.0]);
+        assert_eq!(map.sample(0, [1.0, 1.0]), [1.0, 2.0, 0.0]);
+        assert_eq!(map.sample(1, [0.5, 0.5]), [0.0; 3]);
+        assert_eq!(map.sample(0, [f64::NAN, 0.5]), [0.0; 3]);
+    }
+
+    #[test]
+    fn outgoing_radiance_is_the_albedo_times_the_light_map() {
+        let scene = quad_scene(false);
+        let atlas = Atlas::new(&scene, Some(8.0)).expect("atlas");
+        // A uniform map: every point reads it exactly, whatever the charts.
+        let map = LightMap {
+            width: atlas.width,
+            height: atlas.height,
+            pages: atlas.pages,
+            texels: vec![[2.0, 4.0, 8.0]; (atlas.width * atlas.height * atlas.pages) as usize],
+        };
+        let points = [PointSpec {
+            name: "p".into(),
+            position: DVec3::new(0.3, 0.001, 0.6),
+            normal: DVec3::Y,
+        }];
+        let located = locate_all(&scene, &points).expect("located");
+        let shown = shown_at(&scene, &atlas, &map, &located).expect("on the atlas");
+        assert_eq!(shown[0].h, [2.0, 4.0, 8.0]);
+        assert_eq!(shown[0].l, [1.0, 1.0, 1.0]);
+        let off = [PointSpec {
+            position: DVec3::new(3.0, 0.0, 0.0),
+            ..points[0].clone()
+        }];
+        assert!(matches!(
+            locate_all(&scene, &off),
+            Err(PointError::OffSurface { index: 0, .. })
+        ));
+    }
+}
