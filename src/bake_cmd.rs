@@ -366,13 +366,14 @@ fn write_outputs(args: &BakeArgs, job: &Job, result: &BakeResult) -> anyhow::Res
             )
         });
         let lap = Instant::now();
-        let field = SmoothField::new(
+        // The punctual lights' direct light per texel, the rest from the smooth field.
+        let map = radiant::radiosity::texel_light::compose_lightmap(
+            &job.scene,
+            &job.atlas,
             &result.mesh,
             &result.system,
-            &job.scene.surfaces,
             &result.radiosity,
         );
-        let map = lightmap::bake_lightmap(&job.scene, &job.atlas, &result.mesh, &field);
         let lightmap_s = lap.elapsed().as_secs_f64();
         let lap = Instant::now();
         let light = output::write_lightmaps(out, &map)

@@ -43,6 +43,7 @@ pub mod solve;
 pub mod solvers;
 pub mod spectral;
 pub mod system;
+pub mod texel_light;
 
 pub use bake::{Bake, BakeEvent};
 pub use form_factors::{FormFactorKind, FormFactorParams};

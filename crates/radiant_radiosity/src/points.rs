@@ -4,8 +4,9 @@
 //! path-traces, so the two compare point by point (`radiant bake --points`).
 //!
 //! A point is found on the scene as the path tracer finds it: the nearest surface a short ray
-//! from 5 mm above the point, back along its normal, meets within 10 mm; front faces, or back
-//! faces of double-sided surfaces. The point is then projected onto that triangle's plane.
+//! from just above the point ([`lift`]: 0.5 % of the scene's radius), back along its normal,
+//! meets within twice that, which must face the point (or be double-sided). The point is then
+//! projected onto that triangle's plane.
 
 use std::collections::HashMap;
 
@@ -20,8 +21,27 @@ use crate::metrics::PointSpec;
 use crate::system::Rgb;
 
 /// How far above a point (along its normal) the locating ray starts, and half the distance it
-/// searches: the reference path tracer's lift, so both find the same triangle.
+/// searches, as a share of the scene's radius (half its bounding box's diagonal): the reference
+/// path tracer's lift, so both find the same triangle (published quads are not always planar).
 pub const LIFT: f64 = 5e-3;
+
+/// [`LIFT`] in scene units: 0.5 % of half the diagonal of `scene`'s bounding box.
+pub fn lift(scene: &Scene) -> f64 {
+    let (lo, hi) = scene
+        .triangles
+        .iter()
+        .flat_map(|t| t.vertices)
+        .filter(|v| v.is_finite())
+        .fold((DVec3::MAX, DVec3::MIN), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+    let radius = 0.5 * (hi - lo).length();
+    if radius.is_finite() {
+        LIFT * radius
+    } else {
+        0.0
+    }
+}
 
 /// What the renderer shows at one point.
 #[derive(Clone, Debug, PartialEq)]
@@ -40,9 +60,9 @@ pub struct ShownPoint {
 /// Why a point has no value.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum PointError {
-    /// No light-mapped surface facing the point's normal within [`LIFT`] of it.
+    /// No light-mapped surface facing the point's normal within [`lift`] of it.
     #[error(
-        "point {index} ('{name}') lies on no light-mapped surface that faces its normal (searched 5 mm either side along the normal)"
+        "point {index} ('{name}') lies on no light-mapped surface that faces its normal (searched 0.5 % of the scene's radius either side along the normal)"
     )]
     OffSurface {
         /// Row of the point (0-based).
@@ -64,13 +84,14 @@ pub enum PointError {
 /// The light-mapped (static) triangle a point lies on and the point projected onto its plane,
 /// as `radiant reference` locates it (see the module); `None` where there is none.
 pub fn locate(scene: &Scene, position: DVec3, normal: DVec3) -> Option<(u32, DVec3)> {
-    locate_among(scene, &static_roots(scene), position, normal)
+    locate_among(scene, &static_roots(scene), lift(scene), position, normal)
 }
 
 /// [`locate`] among the triangles `roots` (from [`static_roots`]) marks as static.
 fn locate_among(
     scene: &Scene,
     roots: &[Option<u32>],
+    lift: f64,
     position: DVec3,
     normal: DVec3,
 ) -> Option<(u32, DVec3)> {
@@ -78,8 +99,9 @@ fn locate_among(
     if !position.is_finite() {
         return None;
     }
-    let origin = position + n * LIFT;
-    let mut best: Option<(f64, u32)> = None;
+    let origin = position + n * lift;
+    // The nearest face met, front or back (a front face wins a tie).
+    let mut best: Option<(f64, bool, u32)> = None;
     for (i, t) in scene.triangles.iter().enumerate() {
         if roots.get(i).is_none_or(Option::is_none) {
             continue;
@@ -87,16 +109,20 @@ fn locate_among(
         let Some((dist, front)) = hit(t, origin, -n) else {
             continue;
         };
-        let double_sided = scene
-            .surfaces
-            .get(t.surface as usize)
-            .is_some_and(|s| s.double_sided);
-        if dist <= 2.0 * LIFT && (front || double_sided) && best.is_none_or(|(d, _)| dist < d) {
-            best = Some((dist, i as u32));
+        let nearer = best.is_none_or(|(d, f, _)| dist < d || (dist == d && front && !f));
+        if dist <= 2.0 * lift && nearer {
+            best = Some((dist, front, i as u32));
         }
     }
-    let (_, i) = best?;
+    let (_, front, i) = best?;
     let t = &scene.triangles[i as usize];
+    let double_sided = scene
+        .surfaces
+        .get(t.surface as usize)
+        .is_some_and(|s| s.double_sided);
+    if !(front || double_sided) {
+        return None;
+    }
     let normal = t.cross().normalize();
     Some((
         i,
@@ -133,12 +159,12 @@ fn hit(t: &Triangle, origin: DVec3, dir: DVec3) -> Option<(f64, bool)> {
 /// # Errors
 /// [`PointError::OffSurface`] for the first point on no light-mapped surface.
 pub fn locate_all(scene: &Scene, points: &[PointSpec]) -> Result<Vec<(u32, DVec3)>, PointError> {
-    let roots = static_roots(scene);
+    let (roots, lift) = (static_roots(scene), lift(scene));
     points
         .par_iter()
         .enumerate()
         .map(|(index, p)| {
-            locate_among(scene, &roots, p.position, p.normal).ok_or_else(|| {
+            locate_among(scene, &roots, lift, p.position, p.normal).ok_or_else(|| {
                 PointError::OffSurface {
                     index,
                     name: p.name.clone(),
@@ -260,7 +286,8 @@ mod tests {
     fn a_point_is_found_on_the_face_it_looks_at() {
         let scene = quad_scene(false);
         let up = DVec3::Y;
-        let (t, x) = locate(&scene, DVec3::new(0.25, 0.004, 0.75), up).expect("on the floor");
+        // The floor's radius is 0.71: points within 3.5 mm of it are on it.
+        let (t, x) = locate(&scene, DVec3::new(0.25, 0.003, 0.75), up).expect("on the floor");
         assert_eq!(t, 0);
         assert_eq!(x, DVec3::new(0.25, 0.0, 0.75));
         assert_eq!(

@@ -499,6 +499,57 @@ impl Atlas {
     }
 }
 
+/// The point at barycentric weights `(u, v)` of vertices 1 and 2 of the triangle `p`: how
+/// [`rasterize`] places a texel.
+pub fn texel_position(p: [DVec3; 3], u: f32, v: f32) -> DVec3 {
+    p[0] + (p[1] - p[0]) * f64::from(u) + (p[2] - p[0]) * f64::from(v)
+}
+
+/// Which triangle fills a texel of a page, and where (see [`Atlas::owners`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TexelOwner {
+    /// The scene triangle, or `u32::MAX` for a texel no chart fills.
+    pub triangle: u32,
+    /// Barycentric weight of the triangle's second vertex (clamped onto it for ring texels).
+    pub u: f32,
+    /// Barycentric weight of its third vertex.
+    pub v: f32,
+}
+
+impl TexelOwner {
+    /// A texel no chart fills.
+    pub const NONE: TexelOwner = TexelOwner {
+        triangle: u32::MAX,
+        u: 0.0,
+        v: 0.0,
+    };
+}
+
+impl Atlas {
+    /// Per texel of `page` (row-major), the triangle [`Atlas::fill`] fills it from and the
+    /// weights it uses, so that texels can be filled in any order (in parallel) with the same
+    /// values: `eval(triangle, u, v, texel_position(vertices, u, v))`.
+    pub fn owners(&self, scene: &Scene, page: u32) -> Vec<TexelOwner> {
+        let mut out = vec![TexelOwner::NONE; self.width as usize * self.height as usize];
+        let charts = scene
+            .triangles
+            .iter()
+            .zip(&self.uv)
+            .enumerate()
+            .filter(|(i, _)| self.page.get(*i).copied().unwrap_or(0) == page)
+            .map(|(i, (t, uv))| (i, *uv, t.vertices));
+        let width = self.width;
+        visit_filled(self.width, self.height, charts, |t| {
+            out[(t.y * width + t.x) as usize] = TexelOwner {
+                triangle: t.triangle,
+                u: t.u,
+                v: t.v,
+            };
+        });
+        out
+    }
+}
+
 /// Calls `f` once per texel [`rasterize`] fills (page 0 in the texel), inside texels first.
 fn visit_filled(
     width: u32,
@@ -532,8 +583,7 @@ fn visit_filled(
                     // Barycentrics, clamped onto the triangle for the ring around it.
                     let u = u.clamp(0.0, 1.0);
                     let v = v.clamp(0.0, 1.0 - u);
-                    let position =
-                        p[0] + (p[1] - p[0]) * f64::from(u) + (p[2] - p[0]) * f64::from(v);
+                    let position = texel_position(p, u, v);
                     f(AtlasTexel {
                         page: 0,
                         x,

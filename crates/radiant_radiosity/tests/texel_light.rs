@@ -1,0 +1,176 @@
+//! The light map composed per texel (`radiosity::texel_light`): a sun's shadow edges as sharp as
+//! the texel grid, wherever the elements lie; the same bytes on any thread count; and a scene
+//! without punctual lights filled from the smooth field alone, as before.
+
+mod common;
+
+use glam::DVec3;
+use radiant_radiosity::BakeParams;
+use radiant_radiosity::lightmap::{LightMap, bake_lightmap};
+use radiant_radiosity::scenes::{add_surface, box_triangles, quad};
+use radiant_radiosity::smooth::SmoothField;
+use radiant_radiosity::texel_light::compose_lightmap;
+use radiant_scene::atlas::{Atlas, texel_position};
+use radiant_scene::{Light, LightKind, Scene};
+
+/// Texels per metre of the tests' light maps.
+const DENSITY: f64 = 256.0;
+
+/// A sun straight down whose direct light gives `H = 1` on a floor facing up.
+fn sun_down() -> Light {
+    Light {
+        name: "sun".into(),
+        kind: LightKind::Directional,
+        position: DVec3::ZERO,
+        direction: DVec3::NEG_Y,
+        intensity: std::f64::consts::PI,
+        color: [1.0; 3],
+        range: None,
+    }
+}
+
+/// A grey floor `[0, 1]²` (x, z) at y = 0, facing up.
+fn floor(scene: &mut Scene) {
+    let f = quad(DVec3::ZERO, DVec3::Z, DVec3::X);
+    add_surface(scene, "floor", [0.5; 3], [0.0; 3], &f);
+}
+
+/// Every floor texel's world position and its `H` (red channel).
+fn floor_texels(scene: &Scene, atlas: &Atlas, map: &LightMap) -> Vec<(DVec3, f32)> {
+    let size = (atlas.width * atlas.height) as usize;
+    let mut out = Vec::new();
+    for page in 0..atlas.pages {
+        for (k, o) in atlas.owners(scene, page).iter().enumerate() {
+            let Some(t) = scene.triangles.get(o.triangle as usize) else {
+                continue;
+            };
+            if scene.surfaces[t.surface as usize].name == "floor" {
+                let p = texel_position(t.vertices, o.u, o.v);
+                out.push((p, map.texels[page as usize * size + k][0]));
+            }
+        }
+    }
+    out
+}
+
+/// Bakes `scene` and composes its light map at [`DENSITY`].
+fn baked(scene: &Scene) -> (Atlas, LightMap) {
+    let r = common::bake(scene, &BakeParams::default());
+    let atlas = Atlas::new(scene, Some(DENSITY)).expect("atlas");
+    let map = compose_lightmap(scene, &atlas, &r.mesh, &r.system, &r.radiosity);
+    (atlas, map)
+}
+
+/// A black roof over the floor with a slot two texels wide along z: the sun lights a strip of
+/// the floor whose edges lie within one texel of the slot's, and nothing else (the roof is
+/// black and the floor cannot see itself: the floor's `H` is the sun's alone).
+#[test]
+fn a_sun_through_a_slot_two_texels_wide_lights_a_sharp_strip() {
+    let texel = 1.0 / DENSITY;
+    let (centre, half) = (0.5, texel);
+    let mut scene = Scene::default();
+    floor(&mut scene);
+    let roof = |x0: f64, x1: f64| {
+        quad(
+            DVec3::new(x0, 0.5, -0.5),
+            DVec3::X * (x1 - x0),
+            DVec3::Z * 2.0,
+        )
+    };
+    let mut tris = roof(-0.5, centre - half).to_vec();
+    tris.extend(roof(centre + half, 1.5));
+    add_surface(&mut scene, "roof", [0.0; 3], [0.0; 3], &tris);
+    scene.lights.push(sun_down());
+    let (atlas, map) = baked(&scene);
+    let texels = floor_texels(&scene, &atlas, &map);
+    let (mut lit, mut wrong) = (0, Vec::new());
+    for &(p, h) in &texels {
+        let d = (p.x - centre).abs();
+        let on = h > 0.5;
+        lit += usize::from(on);
+        // The footprint's half diagonal is 0.71 texel: past 0.75 texel from an edge a texel
+        // is wholly in or wholly out.
+        let must = if d < half - 0.75 * texel {
+            h >= 0.999
+        } else if d > half + 0.75 * texel {
+            h == 0.0
+        } else {
+            (0.0..=1.0001).contains(&h)
+        };
+        // The strip's edge (half lit) within one texel of the slot's.
+        let edge = (on && d < half + texel) || (!on && d > half - texel);
+        if !(must && edge) {
+            wrong.push((p, h));
+        }
+    }
+    eprintln!("{} floor texels, {lit} lit", texels.len());
+    assert!(
+        wrong.is_empty(),
+        "{} wrong: {:?}",
+        wrong.len(),
+        &wrong[..wrong.len().min(8)]
+    );
+    // The strip: 2 texels wide, 256 long.
+    assert!((384..=640).contains(&lit), "{lit} lit texels");
+}
+
+/// A closed black box standing on a sunlit floor: no floor texel under it gets sun, and every
+/// texel a texel or more away from it gets all of it; the same bytes on one thread and two.
+#[test]
+fn a_box_on_a_sunlit_floor_shadows_exactly_its_footprint_on_any_thread_count() {
+    let texel = 1.0 / DENSITY;
+    let (lo, hi) = (DVec3::new(0.3, 0.0, 0.35), DVec3::new(0.62, 0.25, 0.71));
+    let mut scene = Scene::default();
+    floor(&mut scene);
+    add_surface(
+        &mut scene,
+        "box",
+        [0.0; 3],
+        [0.0; 3],
+        &box_triangles(lo, hi, false),
+    );
+    scene.lights.push(sun_down());
+    let r = common::bake(&scene, &BakeParams::default());
+    let atlas = Atlas::new(&scene, Some(DENSITY)).expect("atlas");
+    let on = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool")
+            .install(|| compose_lightmap(&scene, &atlas, &r.mesh, &r.system, &r.radiosity))
+    };
+    let map = on(1);
+    assert!(
+        map == on(2),
+        "the light map differs between 1 and 2 threads"
+    );
+    let (mut under, mut open) = (0, 0);
+    for (p, h) in floor_texels(&scene, &atlas, &map) {
+        // Distance outside the box's footprint (negative inside).
+        let dx = (lo.x - p.x).max(p.x - hi.x);
+        let dz = (lo.z - p.z).max(p.z - hi.z);
+        let out = dx.max(dz);
+        if out < -0.75 * texel {
+            assert_eq!(h, 0.0, "under the box at {p}");
+            under += 1;
+        } else if out > 0.75 * texel {
+            assert!((0.999..1.0001).contains(&h), "beside the box at {p}: {h}");
+            open += 1;
+        }
+    }
+    assert!(under > 5000 && open > 30000, "{under} under, {open} open");
+}
+
+/// Without punctual lights the composed light map is the smooth field's, bit for bit.
+#[test]
+fn without_punctual_lights_the_map_is_the_smooth_fields() {
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    let mut p = BakeParams::default();
+    p.mesh.patch_size = 0.3;
+    let r = common::bake(&scene, &p);
+    let atlas = Atlas::new(&scene, None).expect("atlas");
+    let field = SmoothField::new(&r.mesh, &r.system, &scene.surfaces, &r.radiosity);
+    let old = bake_lightmap(&scene, &atlas, &r.mesh, &field);
+    let new = compose_lightmap(&scene, &atlas, &r.mesh, &r.system, &r.radiosity);
+    assert!(old == new);
+}
