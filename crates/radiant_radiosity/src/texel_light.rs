@@ -1,23 +1,29 @@
 //! The light map of a bake, composed per texel: the punctual lights' direct light (a sun's
 //! shadows) computed at every texel's own footprint with its own shadow rays, plus the rest of
-//! the solution (bounced light, emitters, the sky) from the smooth field of the elements.
+//! the solution (bounced light, emitters, the sky) from the smooth field of the elements; and
+//! where part of a texel lies inside or under other geometry, only the part in the open.
 //!
 //! Why: the solution carries a light's direct part by elements, each lit or shadowed by one
 //! ray from its centroid and interpolated across its neighbours, so a shadow edge lands where
 //! the element grid puts it (metre-wide elements on a level: bands of sun leaking into shadow,
 //! sunlit texels darkened near an edge). The solution keeps that direct light for its bounces;
 //! the light map takes it out again, `B − ρ D / π` per element with the same rays, and adds
-//! each texel's own `D / π` instead, so nothing is counted twice. A scene without punctual
-//! lights gets the smooth field alone, as before.
+//! each texel's own `D / π` instead, so nothing is counted twice.
 //!
 //! A texel's footprint is its square in the atlas mapped onto its triangle (points outside the
-//! triangle clamped onto it): each light is first sampled at the centres of its 2 × 2
-//! quarters; where those agree (all lit or all shadowed) that is the texel's value, and
-//! otherwise it takes the 4 × 4 grid, so an edge crossing a texel gives it the share of the
-//! footprint the light reaches, in sixteenths, the same on every run and thread count.
+//! triangle clamped onto it). Its 2 × 2 quarter centres are probed first: a point is buried
+//! when the first face a ray along its normal meets is the back of a single-sided one (a box
+//! on a floor, a wall's foot, a column on its plinth). With none buried, each light is sampled
+//! at those four points, and where they disagree (lit and shadowed) on the 4 × 4 grid, so an
+//! edge crossing the texel gives it its share in sixteenths; the rest of the light is read at
+//! the texel's centre. With some buried, the texel takes the 4 × 4 grid's open points alone:
+//! the lights over them, the rest at their centroid, so no light reaches it through the
+//! occluder and no shade from under it. A wholly buried texel takes the mean of its open
+//! neighbours on the same surface and chart, which bilinear filtering reads at a contact. The same bytes
+//! on every run and thread count.
 
 use glam::{DVec2, DVec3};
-use radiant_scene::atlas::Atlas;
+use radiant_scene::atlas::{Atlas, texel_position};
 use radiant_scene::{Light, LightKind, Scene};
 use radiant_visibility::Visibility;
 use rayon::prelude::*;
@@ -27,10 +33,22 @@ use crate::mesh::{Frame, Mesh};
 use crate::smooth::SmoothField;
 use crate::system::{Rgb, System};
 
-/// Sub-samples a side of a texel where its first 2 × 2 disagree.
+/// Sub-samples a side of a texel where its first 2 × 2 disagree (on the light, or on what is
+/// buried).
 pub const FINE: u32 = 4;
 
-/// The punctual lights' direct light at light-map texels.
+/// What a texel's footprint comes to (see the module).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TexelSample {
+    /// The barycentric weights `(u, v)` of vertices 1 and 2 of the texel's triangle where the
+    /// rest of the light is read: the texel's centre, or where part of its footprint is
+    /// buried, the centroid of the part that is not; `None` when all of it is buried.
+    pub at: Option<(f32, f32)>,
+    /// `D / π`, the lights' direct light over the footprint's visible part.
+    pub direct: Rgb,
+}
+
+/// The punctual lights' direct light, and what is buried, at light-map texels.
 pub struct TexelLights<V> {
     frame: Frame,
     vis: V,
@@ -41,6 +59,9 @@ pub struct TexelLights<V> {
     tris: Vec<Option<([DVec3; 3], DVec3)>>,
     /// Per scene triangle: its atlas coordinates in texels.
     uv: Vec<[DVec2; 3]>,
+    /// Per triangle of `vis` (the mesh's input triangles): whether its surface is
+    /// double-sided (a back face that hides nothing).
+    double_sided: Vec<bool>,
 }
 
 impl<V: Visibility> TexelLights<V> {
@@ -72,12 +93,23 @@ impl<V: Visibility> TexelLights<V> {
             .iter()
             .map(|t| t.map(|c| c.as_dvec2() * size))
             .collect();
+        let double_sided = mesh
+            .root_surface
+            .iter()
+            .map(|&s| {
+                scene
+                    .surfaces
+                    .get(s as usize)
+                    .is_some_and(|s| s.double_sided)
+            })
+            .collect();
         TexelLights {
             frame,
             vis,
             lights,
             tris,
             uv,
+            double_sided,
         }
     }
 
@@ -86,40 +118,86 @@ impl<V: Visibility> TexelLights<V> {
         self.lights.is_empty()
     }
 
-    /// `D / π`, the incident radiance the lights give the texel that [`Atlas::fill`] fills from
-    /// `triangle` at weights `(u, v)` (see the module).
-    pub fn h(&self, triangle: usize, u: f32, v: f32) -> Rgb {
+    /// Whether the point `x` (normal `n`) lies inside or under other geometry: the first face
+    /// a ray along its normal meets is the back of a single-sided one (a box standing on a
+    /// floor, a wall's foot, a column on its plinth).
+    fn buried(&self, x: DVec3, n: DVec3) -> bool {
+        // From just above the surface: a face lying on it (a box's bottom on a floor) is not
+        // met, the box's top from inside is.
+        self.vis
+            .closest_hit((x + n * 1e-5).as_vec3(), n.as_vec3(), 4.0)
+            .is_some_and(|h| {
+                !h.front
+                    && !self
+                        .double_sided
+                        .get(h.triangle as usize)
+                        .copied()
+                        .unwrap_or(false)
+            })
+    }
+
+    /// The texel that [`Atlas::fill`] fills from `triangle` at weights `(u, v)` (see the
+    /// module): where its light is read, and the lights' direct part.
+    pub fn sample(&self, triangle: usize, u: f32, v: f32) -> TexelSample {
         let (Some(Some((p, n))), Some(uv)) = (self.tris.get(triangle), self.uv.get(triangle))
         else {
-            return [0.0; 3];
+            return TexelSample {
+                at: Some((u, v)),
+                direct: [0.0; 3],
+            };
         };
-        let (u, v) = (f64::from(u), f64::from(v));
-        let centre = uv[0] * (1.0 - u - v) + uv[1] * u + uv[2] * v;
+        let (u0, v0) = (f64::from(u), f64::from(v));
+        let centre = uv[0] * (1.0 - u0 - v0) + uv[1] * u0 + uv[2] * v0;
         let (e1, e2) = (uv[1] - uv[0], uv[2] - uv[0]);
         let det = e1.perp_dot(e2);
-        // The point of the triangle at texel coordinates `s`, clamped onto it.
-        let at = |s: DVec2| -> DVec3 {
+        // The weights on the triangle of texel coordinates `s`, clamped onto it.
+        let weights = |s: DVec2| -> (f64, f64) {
             let (a, b) = if det.abs() > 1e-12 && det.is_finite() {
                 let q = s - uv[0];
                 (q.perp_dot(e2) / det, e1.perp_dot(q) / det)
             } else {
-                (u, v)
+                (u0, v0)
             };
             let a = a.clamp(0.0, 1.0);
-            let b = b.clamp(0.0, 1.0 - a);
-            p[0] + (p[1] - p[0]) * a + (p[2] - p[0]) * b
+            (a, b.clamp(0.0, 1.0 - a))
         };
-        let grid = |k: u32| {
-            (0..k * k).map(move |i| {
-                let step = 1.0 / f64::from(k);
-                let (x, y) = (f64::from(i % k), f64::from(i / k));
-                centre + DVec2::new((x + 0.5) * step - 0.5, (y + 0.5) * step - 0.5)
-            })
+        let point = |(a, b): (f64, f64)| p[0] + (p[1] - p[0]) * a + (p[2] - p[0]) * b;
+        let grid = |k: u32| -> Vec<(f64, f64)> {
+            (0..k * k)
+                .map(|i| {
+                    let step = 1.0 / f64::from(k);
+                    let (x, y) = (f64::from(i % k), f64::from(i / k));
+                    weights(centre + DVec2::new((x + 0.5) * step - 0.5, (y + 0.5) * step - 0.5))
+                })
+                .collect()
         };
-        let mut out = [0.0; 3];
+        let coarse = grid(2);
+        let buried: Vec<bool> = coarse.iter().map(|&w| self.buried(point(w), *n)).collect();
+        // All of the footprint in the open (the usual case): read the light at the texel's
+        // centre; otherwise at the centroid of the fine grid's open points, and the lights over
+        // those alone.
+        let (open, at, whole) = if buried.iter().all(|b| !b) {
+            (coarse, Some((u, v)), true)
+        } else {
+            let open: Vec<(f64, f64)> = grid(FINE)
+                .into_iter()
+                .filter(|&w| !self.buried(point(w), *n))
+                .collect();
+            if open.is_empty() {
+                return TexelSample {
+                    at: None,
+                    direct: [0.0; 3],
+                };
+            }
+            let k = open.len() as f64;
+            let (a, b) = open.iter().fold((0.0, 0.0), |s, w| (s.0 + w.0, s.1 + w.1));
+            let at = Some(((a / k) as f32, (b / k) as f32));
+            (open, at, false)
+        };
+        let mut direct = [0.0; 3];
         for (light, local) in &self.lights {
-            let one = |s: DVec2| -> (f64, bool) {
-                let x = at(s);
+            let one = |&w: &(f64, f64)| -> (f64, bool) {
+                let x = point(w);
                 match self.unshadowed(light, *local, x, *n) {
                     Some((irr, target)) => {
                         (irr, self.vis.segment_clear(x.as_vec3(), target.as_vec3()))
@@ -127,25 +205,21 @@ impl<V: Visibility> TexelLights<V> {
                     None => (0.0, false),
                 }
             };
-            let coarse: Vec<(f64, bool)> = grid(2).map(one).collect();
-            let agree = coarse.iter().all(|c| c.1 == coarse[0].1);
-            let (sum, count) = if agree {
-                let lit = coarse.iter().filter(|c| c.1).map(|c| c.0).sum::<f64>();
-                (lit, 4.0)
+            let first: Vec<(f64, bool)> = open.iter().map(one).collect();
+            let agree = first.iter().all(|c| c.1 == first[0].1);
+            let lit = |s: &[(f64, bool)]| s.iter().filter(|c| c.1).map(|c| c.0).sum::<f64>();
+            let mean = if agree || !whole {
+                lit(&first) / first.len() as f64
             } else {
-                let lit = grid(FINE)
-                    .map(one)
-                    .filter(|c| c.1)
-                    .map(|c| c.0)
-                    .sum::<f64>();
-                (lit, f64::from(FINE * FINE))
+                let fine: Vec<(f64, bool)> = grid(FINE).iter().map(one).collect();
+                lit(&fine) / fine.len() as f64
             };
-            let irr = sum / count / std::f64::consts::PI;
+            let irr = mean / std::f64::consts::PI;
             for c in 0..3 {
-                out[c] += irr * light.color[c];
+                direct[c] += irr * light.color[c];
             }
         }
-        out
+        TexelSample { at, direct }
     }
 
     /// The light's irradiance at `x` (normal `n`) before shadows, and the point a shadow ray
@@ -171,9 +245,9 @@ impl<V: Visibility> TexelLights<V> {
 }
 
 /// The light map of a bake of `scene` (`mesh`, `system`, `radiosity`) on `atlas`, composed as
-/// the module says. With punctual lights it builds the bake's ray tracer again
-/// ([`crate::input::visibility`], with the alpha masks), so the elements' direct light it takes
-/// out is the one the bake put in, bit for bit.
+/// the module says. It builds the bake's ray tracer again ([`crate::input::visibility`], with
+/// the alpha masks), so the elements' direct light it takes out is the one the bake put in, bit
+/// for bit.
 pub fn compose_lightmap(
     scene: &Scene,
     atlas: &Atlas,
@@ -181,23 +255,12 @@ pub fn compose_lightmap(
     system: &System,
     radiosity: &[Rgb],
 ) -> LightMap {
-    if scene.lights.iter().any(|l| l.intensity > 0.0) {
-        let masks = crate::input::masks(&crate::input::static_scene(scene));
-        let bvh = crate::input::visibility(mesh, masks.as_ref());
-        compose_with(scene, atlas, mesh, system, radiosity, bvh)
-    } else {
-        compose_with(
-            scene,
-            atlas,
-            mesh,
-            system,
-            radiosity,
-            radiant_visibility::BruteForce::new(&[]),
-        )
-    }
+    let masks = crate::input::masks(&crate::input::static_scene(scene));
+    let bvh = crate::input::visibility(mesh, masks.as_ref());
+    compose_with(scene, atlas, mesh, system, radiosity, bvh)
 }
 
-/// [`compose_lightmap`] with the shadow rays of `vis`.
+/// [`compose_lightmap`] with the rays of `vis`.
 pub fn compose_with<V: Visibility>(
     scene: &Scene,
     atlas: &Atlas,
@@ -224,41 +287,117 @@ pub fn compose_with<V: Visibility>(
         SmoothField::new(mesh, system, &scene.surfaces, &rest)
     };
     let roots = static_roots(scene);
-    let eval = |i: usize, u: f32, v: f32| -> [f32; 3] {
+    // A texel's `H`, or `None` where all of its footprint is buried.
+    let eval = |i: usize, u: f32, v: f32| -> Option<[f32; 3]> {
         let Some(&Some(root)) = roots.get(i) else {
-            return [0.0; 3];
+            return Some([0.0; 3]);
         };
         if root as usize >= mesh.roots.len() {
-            return [0.0; 3];
+            return Some([0.0; 3]);
         }
-        let mut h = field.irradiance(mesh, root, f64::from(u), f64::from(v));
-        if !lights.is_empty() {
-            let d = lights.h(i, u, v);
-            for c in 0..3 {
-                h[c] += d[c];
-            }
+        let sample = lights.sample(i, u, v);
+        let (a, b) = sample.at?;
+        let mut h = field.irradiance(mesh, root, f64::from(a), f64::from(b));
+        for c in 0..3 {
+            h[c] += sample.direct[c];
         }
-        h.map(|x| x as f32)
+        Some(h.map(|x| x as f32))
     };
-    let size = atlas.width as usize * atlas.height as usize;
+    let (width, height) = (atlas.width.max(1) as usize, atlas.height as usize);
+    let size = width * height;
     let mut texels = vec![[0.0f32; 3]; size * atlas.pages as usize];
     for (page, texels) in texels.chunks_exact_mut(size.max(1)).enumerate() {
         let owners = atlas.owners(scene, page as u32);
+        let mut buried = vec![false; size];
         texels
-            .par_chunks_mut(atlas.width.max(1) as usize)
-            .zip(owners.par_chunks(atlas.width.max(1) as usize))
-            .for_each(|(row, owners)| {
-                for (t, o) in row.iter_mut().zip(owners) {
+            .par_chunks_mut(width)
+            .zip(owners.par_chunks(width))
+            .zip(buried.par_chunks_mut(width))
+            .for_each(|((row, owners), buried)| {
+                for ((t, o), b) in row.iter_mut().zip(owners).zip(buried) {
                     if o.triangle != u32::MAX {
-                        *t = eval(o.triangle as usize, o.u, o.v);
+                        match eval(o.triangle as usize, o.u, o.v) {
+                            Some(h) => *t = h,
+                            None => *b = true,
+                        }
                     }
                 }
             });
+        dilate_buried(
+            texels,
+            &buried,
+            &owners,
+            scene,
+            (width, 2.5 / atlas.density),
+        );
     }
     LightMap {
         width: atlas.width,
         height: atlas.height,
         pages: atlas.pages,
         texels,
+    }
+}
+
+/// Gives each wholly buried texel the mean of its open neighbours (8-connected) on the same
+/// surface and near it in the scene (within `near`, scene units: the same chart, not one
+/// packed beside it), so that bilinear filtering at a contact reads the light of the open side,
+/// not black or light from under the occluder. One pass: filtering reads one texel deep.
+fn dilate_buried(
+    texels: &mut [[f32; 3]],
+    buried: &[bool],
+    owners: &[radiant_scene::atlas::TexelOwner],
+    scene: &Scene,
+    (width, near): (usize, f64),
+) {
+    if !buried.iter().any(|&b| b) {
+        return;
+    }
+    let at = |k: usize| {
+        let o = owners[k];
+        scene
+            .triangles
+            .get(o.triangle as usize)
+            .map(|t| (t.surface, texel_position(t.vertices, o.u, o.v)))
+    };
+    let same_place = |j: usize, k: usize| match (at(j), at(k)) {
+        (Some((sj, pj)), Some((sk, pk))) => sj == sk && pj.distance(pk) <= near,
+        _ => false,
+    };
+    let height = texels.len() / width.max(1);
+    let mut out = Vec::new();
+    for k in (0..buried.len()).filter(|&k| buried[k]) {
+        let (x, y) = ((k % width) as i64, (k / width) as i64);
+        let mut sum = [0.0f64; 3];
+        let mut count = 0u32;
+        for (dx, dy) in [
+            (-1, -1),
+            (0, -1),
+            (1, -1),
+            (-1, 0),
+            (1, 0),
+            (-1, 1),
+            (0, 1),
+            (1, 1),
+        ] {
+            let (nx, ny) = (x + dx, y + dy);
+            if nx < 0 || ny < 0 || nx >= width as i64 || ny >= height as i64 {
+                continue;
+            }
+            let j = (ny as usize) * width + nx as usize;
+            if buried[j] || owners[j].triangle == u32::MAX || !same_place(j, k) {
+                continue;
+            }
+            for c in 0..3 {
+                sum[c] += f64::from(texels[j][c]);
+            }
+            count += 1;
+        }
+        if count > 0 {
+            out.push((k, sum.map(|v| (v / f64::from(count)) as f32)));
+        }
+    }
+    for (k, h) in out {
+        texels[k] = h;
     }
 }
