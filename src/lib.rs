@@ -60,19 +60,59 @@ pub mod bridge {
     }
 
     /// Fills `render_scene`'s light map (made by `RenderScene::from_scene(scene, ..)`) with the
-    /// bake's incident radiance `H` at each texel's point, from the bake's smooth field
-    /// (`radiosity::smooth`), so the renderer's `albedo × H + E` reproduces it.
+    /// light map the bake writes (`radiosity::texel_light::compose_lightmap` on the renderer's
+    /// own atlas: the lights' direct light per texel, the open part of texels at contacts, the
+    /// smooth field for the rest), so the frame shows what `lightmap.exr`, the export and
+    /// `bake --points` hold. An untextured surface's `H` is scaled by its reflectance over the
+    /// 8-bit base colour the renderer stores, so `albedo × H` is the bake's.
     pub fn fill_lightmap_from_bake(
         render_scene: &mut RenderScene,
         scene: &Scene,
         bake: &BakeResult,
     ) {
-        let field = radiant_radiosity::smooth::SmoothField::new(
+        let Some(atlas) = render_scene.atlas.clone() else {
+            return;
+        };
+        let map = radiant_radiosity::texel_light::compose_lightmap(
+            scene,
+            &atlas,
             &bake.mesh,
             &bake.system,
-            &scene.surfaces,
             &bake.radiosity,
         );
-        radiant_ecs::render::fill_lightmap(render_scene, scene, &bake.mesh, &field);
+        let Some(lm) = render_scene.lightmap.as_mut() else {
+            return;
+        };
+        if (lm.width, lm.height, lm.pages) != (map.width, map.height, map.pages) {
+            return;
+        }
+        let scale: Vec<[f64; 3]> = scene
+            .surfaces
+            .iter()
+            .map(|s| {
+                std::array::from_fn(|c| {
+                    let stored = (s.reflectance[c] * 255.0).round() / 255.0;
+                    match (s.base_color_texture, stored > 0.0) {
+                        (Some(_), _) => 1.0,
+                        (None, true) => s.reflectance[c] / stored,
+                        (None, false) => 0.0,
+                    }
+                })
+            })
+            .collect();
+        let size = (map.width * map.height) as usize;
+        for page in 0..map.pages {
+            let owners = atlas.owners(scene, page);
+            let base = page as usize * size;
+            for (k, o) in owners.iter().enumerate() {
+                let Some(t) = scene.triangles.get(o.triangle as usize) else {
+                    continue;
+                };
+                let s = scale[t.surface as usize];
+                let h = map.texels[base + k];
+                lm.texels[base + k] =
+                    std::array::from_fn(|c| (f64::from(h[c]) * s[c]).clamp(0.0, 65504.0) as f32);
+            }
+        }
     }
 }

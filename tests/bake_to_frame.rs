@@ -59,6 +59,97 @@ fn a_lamp_over_a_floor_is_drawn_once() {
     );
 }
 
+/// A black box standing on a floor under a low sun, drawn from above: the frame shows the
+/// light map the bake writes (the sun per texel), so the box's shadow on the floor is sharp
+/// where the geometry puts it, however coarse the elements (half a metre, as a level's).
+#[test]
+fn a_box_casts_a_sharp_sun_shadow_in_the_frame_whatever_the_elements() {
+    let gpu = GpuContext::headless().unwrap_or_else(|e| {
+        panic!("GPU tests need an adapter: {e}. Run tools/test.sh, which installs lavapipe.")
+    });
+    let rho = 153.0 / 255.0; // stored exactly by the 8-bit G-buffer
+    let mut scene = Scene::default();
+    let floor = quad(
+        DVec3::new(-1.0, 0.0, 1.0),
+        DVec3::new(2.0, 0.0, 0.0),
+        DVec3::new(0.0, 0.0, -2.0),
+    );
+    add_surface(&mut scene, "floor", [rho; 3], [0.0; 3], &floor);
+    let (lo, hi) = (DVec3::new(-0.3, 0.0, -0.3), DVec3::new(0.3, 0.4, 0.3));
+    let cube = radiant::radiosity::scenes::box_triangles(lo, hi, false);
+    add_surface(&mut scene, "box", [0.0; 3], [0.0; 3], &cube);
+    // Down and towards +x, 2 : 1: the top's edge at x = 0.3 shades the floor to x = 0.5. Its
+    // illuminance on the floor is π, so the lit floor has H = 1.
+    let direction = DVec3::new(1.0, -2.0, 0.0).normalize();
+    scene.lights.push(Light {
+        name: "sun".into(),
+        kind: LightKind::Directional,
+        position: DVec3::ZERO,
+        direction,
+        color: [1.0; 3],
+        intensity: std::f64::consts::PI / -direction.y,
+        range: None,
+    });
+    let (height, tan) = (3.0, 0.3f64.tan());
+    scene.camera = Some(Camera {
+        position: DVec3::new(0.0, height, 0.0),
+        forward: DVec3::NEG_Y,
+        up: DVec3::NEG_Z,
+        yfov: 0.6,
+    });
+    let mut params = BakeParams::default();
+    params.mesh.patch_size = 0.5;
+    params.mesh.element_levels = 0;
+    let bake = Bake::new(&scene, &params)
+        .expect("bake")
+        .run_to_end(&mut |_| {})
+        .expect("solve");
+    let rs = radiant::bridge::render_scene(&scene, Some(&bake), Some(64.0)).expect("render scene");
+    let mut frame = FrameRenderer::new(&gpu, &rs).expect("renderer");
+    let n = 129;
+    let c = frame
+        .capture(&gpu, n, n, &FrameSettings::MINIMAL)
+        .expect("capture");
+    let (mut lit, mut shade, mut wrong) = (0, 0, Vec::new());
+    for j in 0..n {
+        for i in 0..n {
+            let ndc = |k: u32| (f64::from(k) + 0.5) / f64::from(n) * 2.0 - 1.0;
+            let (x, z) = (ndc(i) * tan * height, ndc(j) * tan * height);
+            // Off the box's footprint by more than its top's overhang in perspective (4.3 cm),
+            // inside the floor, and two texels (3 cm) or more from the shadow's edge.
+            let off_box = (lo.x - x).max(x - hi.x).max((lo.z - z).max(z - hi.z));
+            let off_shadow = (lo.x - x)
+                .max(x - (hi.x + 0.2))
+                .max((lo.z - z).max(z - hi.z));
+            if off_box < 0.075 || x.abs() > 0.95 || z.abs() > 0.95 || off_shadow.abs() < 0.03 {
+                continue;
+            }
+            let got = f64::from(c.hdr.at(i, j)[0]);
+            let ok = if off_shadow > 0.0 {
+                lit += 1;
+                (got - rho).abs() <= 0.03 * rho
+            } else {
+                shade += 1;
+                got <= 0.03 * rho
+            };
+            if !ok {
+                wrong.push((x, z, got));
+            }
+        }
+    }
+    assert!(
+        lit > 5000 && shade > 150,
+        "{lit} lit and {shade} shaded pixels checked"
+    );
+    assert!(
+        wrong.is_empty(),
+        "{} of {} floor pixels wrong: {:?}",
+        wrong.len(),
+        lit + shade,
+        &wrong[..wrong.len().min(6)]
+    );
+}
+
 /// The light map's `H` at `uv`, bilinear as the renderer samples it (clamped at the edges).
 fn sample(lm: &radiant::render::scene::LightMap, uv: [f32; 2]) -> [f64; 3] {
     let (w, h) = (lm.width as f32, lm.height as f32);
