@@ -11,16 +11,18 @@
 //! each texel's own `D / π` instead, so nothing is counted twice.
 //!
 //! A texel's footprint is its square in the atlas mapped onto its triangle (points outside the
-//! triangle clamped onto it). Its 2 × 2 quarter centres are probed first: a point is buried
-//! when the first face a ray along its normal meets is the back of a single-sided one (a box
-//! on a floor, a wall's foot, a column on its plinth). With none buried, each light is sampled
-//! at those four points, and where they disagree (lit and shadowed) on the 4 × 4 grid, so an
-//! edge crossing the texel gives it its share in sixteenths; the rest of the light is read at
-//! the texel's centre. With some buried, the texel takes the 4 × 4 grid's open points alone:
-//! the lights over them, the rest at their centroid, so no light reaches it through the
-//! occluder and no shade from under it. A wholly buried texel takes the mean of its open
-//! neighbours on the same surface and chart, which bilinear filtering reads at a contact. The same bytes
-//! on every run and thread count.
+//! triangle clamped onto it). A point of it is buried when the first face a ray along its
+//! normal meets is the back of a single-sided one (a box on a floor, a wall's foot, a column
+//! on its plinth). Short segments just above the surface, from the footprint's centre to its
+//! 2 × 2 quarter centres, say whether other geometry splits it; when none does, one such ray
+//! at the centre says whether all of it is open or buried. All open (the usual case), each
+//! light is sampled at the four quarter centres, and where they disagree (lit and shadowed) on
+//! the 4 × 4 grid, so an edge crossing the texel gives it its share in sixteenths; the rest of
+//! the light is read at the texel's centre. Split, the texel takes the 4 × 4 grid's open
+//! points alone: the lights over them, the rest at their centroid, so no light reaches it
+//! through the occluder and no shade from under it. A wholly buried texel takes the mean of
+//! its open neighbours on the same surface and chart, which bilinear filtering reads at a
+//! contact. The same bytes on every run and thread count.
 
 use glam::{DVec2, DVec3};
 use radiant_scene::atlas::{Atlas, texel_position};
@@ -172,11 +174,24 @@ impl<V: Visibility> TexelLights<V> {
                 .collect()
         };
         let coarse = grid(2);
-        let buried: Vec<bool> = coarse.iter().map(|&w| self.buried(point(w), *n)).collect();
+        // Is the footprint split by other geometry? Short segments from its centre to its
+        // quarters, just above the surface (cheap: they stay near the texel); when none is
+        // blocked, one probe at the centre says whether all of it is in the open or buried.
+        let centre_point = point((u0, v0));
+        let above = |x: DVec3| (x + *n * 1e-5).as_vec3();
+        let split = coarse
+            .iter()
+            .any(|&w| !self.vis.segment_clear(above(centre_point), above(point(w))));
         // All of the footprint in the open (the usual case): read the light at the texel's
         // centre; otherwise at the centroid of the fine grid's open points, and the lights over
         // those alone.
-        let (open, at, whole) = if buried.iter().all(|b| !b) {
+        let (open, at, whole) = if !split {
+            if self.buried(centre_point, *n) {
+                return TexelSample {
+                    at: None,
+                    direct: [0.0; 3],
+                };
+            }
             (coarse, Some((u, v)), true)
         } else {
             let open: Vec<(f64, f64)> = grid(FINE)
