@@ -1,22 +1,27 @@
 //! Picks surface points of a scene lit by a directional light (a sun) for `radiant bake
 //! --points` and `radiant reference --points`, classed by what the sun does around them:
 //! `sunlit` (the point and a 15 cm disc around it all see the sun), `shadowed` (none of them
-//! does) and `edge` (some do: a shadow edge crosses the disc). Points are drawn by area over
-//! the static triangles with a seeded generator, so the same command gives the same file; where
-//! the scene has a camera, only points it sees (unblocked, within its vertical field of view
-//! and the width of a 16:9 frame) are kept: the points a player looks at.
-//! The classes are geometric (one ray per disc point against the scene's own BVH), not taken
-//! from any bake.
+//! does), `edge` (some do: a shadow edge crosses the disc) and `contact` (the point is in the
+//! open, but within 10 cm of it other geometry stands on the surface: a point of a 10 cm disc
+//! is buried, the first face along the normal being the back of a single-sided one), whatever
+//! the sun does there. Points are drawn by area over the static opaque triangles with a seeded
+//! generator, so the same command gives the same file; where the scene has a camera, only
+//! points it sees (unblocked, within its vertical field of view and the width of a 16:9 frame)
+//! are kept: the points a player looks at. The classes are geometric (rays against the scene's
+//! own BVH, alpha masks included), not taken from any bake.
 //!
 //! `cargo run --release --example sun_points -- SCENE.gltf OUT.csv [PER_CLASS] [SEED]`
 //! writes `name,x,y,z,nx,ny,nz,class`, PER_CLASS (default 16) points of each class.
+//! Sponza's (`tools/sponza_sun_points.csv`): PER_CLASS 16, SEED 1.
 
 use glam::{DVec3, Vec3};
-use radiant::scene::LightKind;
+use radiant::scene::{AlphaMode, LightKind};
 use radiant_visibility::{Bvh, Visibility};
 
-/// Radius of the disc a class looks at, metres.
+/// Radius of the disc the sun's classes look at, metres.
 const DISC: f64 = 0.15;
+/// Radius of the disc the contact class looks at, metres.
+const CONTACT: f64 = 0.10;
 /// Points on the disc (and its centre).
 const RING: usize = 16;
 
@@ -52,7 +57,18 @@ fn main() -> anyhow::Result<()> {
         .iter()
         .map(|t| t.vertices.map(|v| v.as_vec3()))
         .collect();
-    let bvh = Bvh::new(&tris);
+    // With the alpha masks, as the bake and the path tracer see them.
+    let bvh = match radiant::scene::texture::AlphaMasks::new(&scene).map(std::sync::Arc::new) {
+        Some(masks) => {
+            let marks = std::sync::Arc::clone(&masks);
+            Bvh::with_filter(
+                &tris,
+                move |t| marks.is_masked(t),
+                std::sync::Arc::new(move |t, u, v| masks.blocks(t, u, v)),
+            )
+        }
+        None => Bvh::new(&tris),
+    };
     let lo = scene
         .triangles
         .iter()
@@ -74,7 +90,10 @@ fn main() -> anyhow::Result<()> {
         .filter(|&i| {
             let t = &scene.triangles[i];
             let s = &scene.surfaces[t.surface as usize];
-            !s.dynamic && !s.is_emitter() && t.cross().normalize_or_zero().dot(to_sun) > 0.2
+            !s.dynamic
+                && !s.is_emitter()
+                && s.alpha == AlphaMode::Opaque
+                && t.cross().normalize_or_zero().dot(to_sun) > 0.2
         })
         .collect();
     let mut cumulative = Vec::with_capacity(candidates.len());
@@ -86,9 +105,9 @@ fn main() -> anyhow::Result<()> {
     anyhow::ensure!(total > 0.0, "no triangle faces the sun");
     let mut rng = Rng(seed);
     let mut rows = Vec::new();
-    let mut counts = [0usize; 3];
-    let names = ["sunlit", "shadowed", "edge"];
-    for _ in 0..200_000 {
+    let mut counts = [0usize; 4];
+    let names = ["sunlit", "shadowed", "edge", "contact"];
+    for _ in 0..2_000_000 {
         if counts.iter().all(|&c| c >= per_class) {
             break;
         }
@@ -104,19 +123,17 @@ fn main() -> anyhow::Result<()> {
         let [v0, v1, v2] = t.vertices;
         let p = v0 + (v1 - v0) * a + (v2 - v0) * b;
         let n = t.cross().normalize();
-        // Where `radiant reference` and `bake --points` will find it: the nearest face within
-        // their lift along the normal must be a front face (or double-sided).
-        let faces_it = bvh
-            .closest_hit(
-                (p + n * lift).as_vec3(),
-                (-n).as_vec3(),
-                (2.0 * lift) as f32,
-            )
-            .is_some_and(|h| {
-                let s = scene.triangles[h.triangle as usize].surface as usize;
-                h.front || scene.surfaces[s].double_sided
-            });
-        if !faces_it {
+        // Where `radiant reference` and `bake --points` will find it, with no doubt left by
+        // rounding: nothing between the point and their lift along the normal, and its own
+        // triangle's front the first face met from there.
+        let from = (p + n * lift).as_vec3();
+        let clear_above = bvh
+            .closest_hit(from, (-n).as_vec3(), (0.99 * lift) as f32)
+            .is_none();
+        let own = bvh
+            .closest_hit(from, (-n).as_vec3(), (1.01 * lift) as f32)
+            .is_some_and(|h| h.front && h.triangle as usize == candidates[k]);
+        if !(clear_above && own) {
             continue;
         }
         if let Some(cam) = &scene.camera {
@@ -144,9 +161,24 @@ fn main() -> anyhow::Result<()> {
                 sees_sun(p + (u * phi.cos() + w * phi.sin()) * DISC, n)
             })
             .count();
-        let class = match (lit_centre, lit_ring) {
-            (true, l) if l == RING => 0,
-            (false, 0) => 1,
+        let buried = |x: DVec3| {
+            bvh.closest_hit((x + n * 1e-4).as_vec3(), n.as_vec3(), f32::MAX)
+                .is_some_and(|h| {
+                    let s = scene.triangles[h.triangle as usize].surface as usize;
+                    !h.front && !scene.surfaces[s].double_sided
+                })
+        };
+        if buried(p) {
+            continue;
+        }
+        let near_contact = (0..RING).any(|j| {
+            let phi = std::f64::consts::TAU * j as f64 / RING as f64;
+            buried(p + (u * phi.cos() + w * phi.sin()) * CONTACT)
+        });
+        let class = match (near_contact, lit_centre, lit_ring) {
+            (true, _, _) => 3,
+            (false, true, l) if l == RING => 0,
+            (false, false, 0) => 1,
             _ => 2,
         };
         if counts[class] >= per_class {
@@ -166,8 +198,8 @@ fn main() -> anyhow::Result<()> {
     }
     std::fs::write(out, text)?;
     println!(
-        "wrote {out}: {} sunlit, {} shadowed, {} edge points",
-        counts[0], counts[1], counts[2]
+        "wrote {out}: {} sunlit, {} shadowed, {} edge, {} contact points",
+        counts[0], counts[1], counts[2], counts[3]
     );
     Ok(())
 }

@@ -80,39 +80,6 @@ pub mod bridge {
             &bake.system,
             &bake.radiosity,
         );
-        let Some(lm) = render_scene.lightmap.as_mut() else {
-            return;
-        };
-        if (lm.width, lm.height, lm.pages) != (map.width, map.height, map.pages) {
-            return;
-        }
-        let scale: Vec<[f64; 3]> = scene
-            .surfaces
-            .iter()
-            .map(|s| {
-                std::array::from_fn(|c| {
-                    let stored = (s.reflectance[c] * 255.0).round() / 255.0;
-                    match (s.base_color_texture, stored > 0.0) {
-                        (Some(_), _) => 1.0,
-                        (None, true) => s.reflectance[c] / stored,
-                        (None, false) => 0.0,
-                    }
-                })
-            })
-            .collect();
-        let size = (map.width * map.height) as usize;
-        for page in 0..map.pages {
-            let owners = atlas.owners(scene, page);
-            let base = page as usize * size;
-            for (k, o) in owners.iter().enumerate() {
-                let Some(t) = scene.triangles.get(o.triangle as usize) else {
-                    continue;
-                };
-                let s = scale[t.surface as usize];
-                let h = map.texels[base + k];
-                lm.texels[base + k] =
-                    std::array::from_fn(|c| (f64::from(h[c]) * s[c]).clamp(0.0, 65504.0) as f32);
-            }
-        }
+        radiant_ecs::render::set_lightmap(render_scene, scene, &atlas, &map);
     }
 }

@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
-# The light map against the path tracer at sunlit, shadowed and shadow-edge points of a scene
-# lit by a sun (issue: sunlight per texel). Defaults to Crytek Sponza with its sun.
+# The light map against the path tracer at sunlit, shadowed, shadow-edge and contact points of
+# a scene lit by a sun (issue: sunlight per texel). Defaults to Crytek Sponza with its sun.
 #
 #   tools/sun_points.sh [SCENE.gltf] [OUT_DIR] [PER_CLASS] [REFERENCE_SECONDS]
 #
-# 1. picks PER_CLASS points of each class (examples/sun_points.rs; tools/sponza_sun_points.csv
-#    is its output for Sponza, PER_CLASS 16, seed 1);
+# 1. picks PER_CLASS points of each class (examples/sun_points.rs; tools/sponza_sun_points.csv is
+#    its output for Sponza, PER_CLASS 16, seed 1);
 # 2. path-traces them (`radiant reference --points`, REFERENCE_SECONDS at most, 0.5 % target);
 # 3. bakes with `--points` and `--reference-points` under /usr/bin/time -v (time, peak RSS);
 # 4. prints the figures per class (tools/points_by_class.py).

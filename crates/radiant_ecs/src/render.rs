@@ -199,6 +199,53 @@ pub fn fill_lightmap(rs: &mut RenderScene, scene: &Scene, mesh: &Mesh, field: &S
     });
 }
 
+/// Copies `map` (a light map on `atlas`, the render scene's own) into the render scene's light
+/// map. On an untextured surface `H` is scaled by `ρ / ρ̃`, `ρ̃` the albedo as the 8-bit
+/// G-buffer stores it, so the frame gives the baked value exactly; a textured one multiplies
+/// by its texel. Texels no chart fills stay 0.
+pub fn set_lightmap(
+    rs: &mut RenderScene,
+    scene: &Scene,
+    atlas: &radiant_scene::atlas::Atlas,
+    map: &radiant_radiosity::lightmap::LightMap,
+) {
+    let Some(lm) = rs.lightmap.as_mut() else {
+        return;
+    };
+    if (lm.width, lm.height, lm.pages) != (map.width, map.height, map.pages)
+        || map.texels.len() != lm.texels.len()
+    {
+        return;
+    }
+    let scale: Vec<[f64; 3]> = scene
+        .surfaces
+        .iter()
+        .map(|s| {
+            std::array::from_fn(|c| {
+                let stored = (s.reflectance[c] * 255.0).round() / 255.0;
+                match (s.base_color_texture, stored > 0.0) {
+                    (Some(_), _) => 1.0,
+                    (None, true) => s.reflectance[c] / stored,
+                    (None, false) => 0.0,
+                }
+            })
+        })
+        .collect();
+    let size = (map.width * map.height) as usize;
+    for page in 0..map.pages {
+        let base = page as usize * size;
+        for (k, o) in atlas.owners(scene, page).iter().enumerate() {
+            let Some(t) = scene.triangles.get(o.triangle as usize) else {
+                continue;
+            };
+            let s = scale[t.surface as usize];
+            let h = map.texels[base + k];
+            lm.texels[base + k] =
+                std::array::from_fn(|c| (f64::from(h[c]) * s[c]).clamp(0.0, 65504.0) as f32);
+        }
+    }
+}
+
 /// Drops the punctual lights from a scene lit by a bake's light map: their direct light (with
 /// shadows) is in the map already, and drawing them too would count it twice.
 pub fn lit_by_bake(rs: &mut RenderScene) {

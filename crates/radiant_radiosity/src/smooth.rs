@@ -23,6 +23,8 @@ use crate::system::{Rgb, System};
 #[derive(Clone, Debug)]
 pub struct SmoothField {
     corners: Vec<[u32; 3]>,
+    /// Per element, the weight of its vote (0: it does not vote).
+    votes: Vec<f64>,
     nodal: Vec<Rgb>,
     /// Per nodal value: whether any element voted.
     voted: Vec<bool>,
@@ -132,10 +134,12 @@ impl SmoothField {
         let mut normal: Vec<DVec3> = Vec::with_capacity(n * 2);
         let mut sum: Vec<[f64; 4]> = Vec::with_capacity(n * 2);
         let mut corners = Vec::with_capacity(n);
+        let mut vote_weights = Vec::with_capacity(n);
         for (i, &leaf) in mesh.leaves.iter().enumerate() {
             let node = &mesh.nodes[leaf as usize];
             let w = node.area * weight.and_then(|w| w.get(i)).copied().unwrap_or(1.0);
             let votes = w > 0.0 && rho[i].iter().any(|&r| r > 1e-6);
+            vote_weights.push(if votes { w } else { 0.0 });
             let mut c = [0u32; 3];
             for (k, p) in node.v.iter().enumerate() {
                 let fresh = normal.len() as u32;
@@ -172,23 +176,53 @@ impl SmoothField {
             corners.push(c);
         }
         let voted: Vec<bool> = sum.iter().map(|s| s[3] > 0.0).collect();
-        let nodal: Vec<Rgb> = sum
-            .iter()
-            .map(|s| {
-                if s[3] > 0.0 {
-                    [s[0] / s[3], s[1] / s[3], s[2] / s[3]]
-                } else {
-                    [0.0; 3]
-                }
-            })
-            .collect();
+        let nodal = nodal_means(&sum);
         SmoothField {
             corners,
+            votes: vote_weights,
             nodal,
             voted,
             own,
             rho,
             emission,
+        }
+    }
+
+    /// The same field with `h[i]` taken from each element's own `H` (at least 0), averaged at
+    /// the same vertices with the same weights: the field of a part of the light (a bake's
+    /// light without its punctual lights' direct part, `crate::texel_light`). Without `h` (or
+    /// with zeros) the field is the same, bit for bit.
+    pub fn minus(&self, h: &[Rgb]) -> SmoothField {
+        let own: Vec<Rgb> = self
+            .own
+            .iter()
+            .enumerate()
+            .map(|(i, o)| {
+                let d = h.get(i).copied().unwrap_or([0.0; 3]);
+                std::array::from_fn(|c| (o[c] - d[c]).max(0.0))
+            })
+            .collect();
+        let mut sum = vec![[0.0f64; 4]; self.nodal.len()];
+        for (i, c) in self.corners.iter().enumerate() {
+            let w = self.votes[i];
+            if w > 0.0 {
+                for &id in c {
+                    let s = &mut sum[id as usize];
+                    for ch in 0..3 {
+                        s[ch] += w * own[i][ch];
+                    }
+                    s[3] += w;
+                }
+            }
+        }
+        SmoothField {
+            corners: self.corners.clone(),
+            votes: self.votes.clone(),
+            nodal: nodal_means(&sum),
+            voted: self.voted.clone(),
+            own,
+            rho: self.rho.clone(),
+            emission: self.emission.clone(),
         }
     }
 
@@ -254,4 +288,17 @@ impl SmoothField {
         let w2 = (b - a).cross(q - a).dot(n) / d;
         Some(self.radiosity_in(e as u32, [1.0 - w1 - w2, w1, w2]))
     }
+}
+
+/// Per vertex, the weighted mean of its votes (`[Σ w H, Σ w]`), 0 where none voted.
+fn nodal_means(sum: &[[f64; 4]]) -> Vec<Rgb> {
+    sum.iter()
+        .map(|s| {
+            if s[3] > 0.0 {
+                [s[0] / s[3], s[1] / s[3], s[2] / s[3]]
+            } else {
+                [0.0; 3]
+            }
+        })
+        .collect()
 }

@@ -25,7 +25,9 @@
 //! contact. The same bytes on every run and thread count.
 
 use glam::{DVec2, DVec3};
-use radiant_scene::atlas::{Atlas, texel_position};
+use std::borrow::Cow;
+
+use radiant_scene::atlas::{Atlas, TexelOwner, texel_position};
 use radiant_scene::{Light, LightKind, Scene};
 use radiant_visibility::Visibility;
 use rayon::prelude::*;
@@ -285,56 +287,90 @@ pub fn compose_with<V: Visibility>(
     vis: V,
 ) -> LightMap {
     let lights = TexelLights::new(scene, atlas, mesh, vis);
-    let field = if lights.is_empty() {
-        SmoothField::new(mesh, system, &scene.surfaces, radiosity)
-    } else {
-        // The lights' direct part of each element, with the rays the bake cast for it.
-        let lit: Vec<Light> = lights.lights.iter().map(|l| l.0.clone()).collect();
-        let direct = crate::lights::direct_irradiance(mesh, &lit, &lights.vis);
-        let rest: Vec<Rgb> = radiosity
-            .iter()
-            .zip(&direct)
-            .zip(&system.rho)
-            .map(|((b, d), rho)| {
-                std::array::from_fn(|c| (b[c] - rho[c] * d[c] / std::f64::consts::PI).max(0.0))
-            })
-            .collect();
-        SmoothField::new(mesh, system, &scene.surfaces, &rest)
-    };
+    let field = SmoothField::new(mesh, system, &scene.surfaces, radiosity);
+    let rest = field.minus(&lights.element_direct(mesh));
     let roots = static_roots(scene);
-    // A texel's `H`, or `None` where all of its footprint is buried.
-    let eval = |i: usize, u: f32, v: f32| -> Option<[f32; 3]> {
-        let Some(&Some(root)) = roots.get(i) else {
-            return Some([0.0; 3]);
-        };
-        if root as usize >= mesh.roots.len() {
-            return Some([0.0; 3]);
+    fill(
+        scene,
+        atlas,
+        |page| Cow::Owned(atlas.owners(scene, page)),
+        |_, o| lights.sample(o.triangle as usize, o.u, o.v),
+        |triangle, at| rest_at(mesh, &roots, &rest, triangle, at),
+    )
+}
+
+impl<V: Visibility> TexelLights<V> {
+    /// Per element of `mesh`, the lights' direct `D / π` the bake put into its source term
+    /// (one ray from its centroid per light, [`crate::lights::direct_irradiance`], with these
+    /// rays: bit for bit the bake's); empty without lights.
+    pub fn element_direct(&self, mesh: &Mesh) -> Vec<Rgb> {
+        if self.is_empty() {
+            return Vec::new();
         }
-        let sample = lights.sample(i, u, v);
-        let (a, b) = sample.at?;
-        let mut h = field.irradiance(mesh, root, f64::from(a), f64::from(b));
-        for c in 0..3 {
-            h[c] += sample.direct[c];
+        let lit: Vec<Light> = self.lights.iter().map(|l| l.0.clone()).collect();
+        let mut d = crate::lights::direct_irradiance(mesh, &lit, &self.vis);
+        for e in &mut d {
+            for c in e.iter_mut() {
+                *c /= std::f64::consts::PI;
+            }
         }
-        Some(h.map(|x| x as f32))
-    };
+        d
+    }
+}
+
+/// `H` of the field `rest` on scene triangle `triangle` at weights `at` (0 off the bake).
+fn rest_at(
+    mesh: &Mesh,
+    roots: &[Option<u32>],
+    rest: &SmoothField,
+    triangle: usize,
+    at: (f32, f32),
+) -> Rgb {
+    match roots.get(triangle).copied().flatten() {
+        Some(root) if (root as usize) < mesh.roots.len() => {
+            rest.irradiance(mesh, root, f64::from(at.0), f64::from(at.1))
+        }
+        _ => [0.0; 3],
+    }
+}
+
+/// The light map on `atlas`: for each texel some triangle fills (`owners` of a page), its
+/// [`TexelSample`] (`sample` of its index over all pages and its owner), `H` = `rest(triangle,
+/// at)` + the sample's direct part, in parallel by rows; then the wholly buried texels from
+/// their open neighbours.
+fn fill<'a>(
+    scene: &Scene,
+    atlas: &Atlas,
+    owners: impl Fn(u32) -> Cow<'a, [TexelOwner]>,
+    sample: impl Fn(usize, &TexelOwner) -> TexelSample + Sync,
+    rest: impl Fn(usize, (f32, f32)) -> Rgb + Sync,
+) -> LightMap {
     let (width, height) = (atlas.width.max(1) as usize, atlas.height as usize);
     let size = width * height;
     let mut texels = vec![[0.0f32; 3]; size * atlas.pages as usize];
     for (page, texels) in texels.chunks_exact_mut(size.max(1)).enumerate() {
-        let owners = atlas.owners(scene, page as u32);
+        let owners = owners(page as u32);
+        if owners.len() != texels.len() {
+            continue;
+        }
         let mut buried = vec![false; size];
         texels
             .par_chunks_mut(width)
             .zip(owners.par_chunks(width))
             .zip(buried.par_chunks_mut(width))
-            .for_each(|((row, owners), buried)| {
-                for ((t, o), b) in row.iter_mut().zip(owners).zip(buried) {
-                    if o.triangle != u32::MAX {
-                        match eval(o.triangle as usize, o.u, o.v) {
-                            Some(h) => *t = h,
-                            None => *b = true,
+            .enumerate()
+            .for_each(|(y, ((row, owners), buried))| {
+                for (x, ((t, o), b)) in row.iter_mut().zip(owners).zip(buried).enumerate() {
+                    if o.triangle == u32::MAX {
+                        continue;
+                    }
+                    let s = sample(page * size + y * width + x, o);
+                    match s.at {
+                        Some(at) => {
+                            let h = rest(o.triangle as usize, at);
+                            *t = std::array::from_fn(|c| (h[c] + s.direct[c]) as f32);
                         }
+                        None => *b = true,
                     }
                 }
             });
