@@ -10,8 +10,10 @@
 use std::sync::Arc;
 
 use bevy_ecs::prelude::*;
+use bevy_tasks::{AsyncComputeTaskPool, Task, TaskPool, futures::check_ready};
 use radiant_post::frame::{FrameRenderer, FrameSettings};
 use radiant_radiosity::smooth::SmoothField;
+use radiant_radiosity::texel_light::TexelBasis;
 use radiant_radiosity::{Mesh, Rgb};
 use radiant_render::capture::Image;
 use radiant_render::scene::{CameraView, RenderScene};
@@ -49,6 +51,11 @@ pub struct RenderSettings {
     /// Draw a frame offscreen every update (default: true). A window turns it off and draws
     /// into its surface with [`render_to`]; the renderer is still kept up to date.
     pub offscreen: bool,
+    /// Light maps of at most this many texels get their per-texel basis (the lights' direct
+    /// light per texel, the open part at contacts: `radiant_radiosity::texel_light`) at once,
+    /// in the frame that needs it (the Cornell box's 0.3 M: about 0.07 s); larger ones in the
+    /// background, frames meanwhile drawing the elements' light (default: [`BASIS_AT_ONCE`]).
+    pub basis_at_once: u64,
 }
 
 impl Default for RenderSettings {
@@ -59,6 +66,7 @@ impl Default for RenderSettings {
             visible_change: 0.002,
             capture: false,
             offscreen: true,
+            basis_at_once: BASIS_AT_ONCE,
         }
     }
 }
@@ -89,10 +97,99 @@ pub struct RenderState {
     pub atlas: Option<AtlasReport>,
     /// That atlas and the density it was made at, reused while the geometry stays the same.
     last_atlas: Option<(Option<f64>, radiant_scene::atlas::Atlas)>,
+    /// The light map's per-texel basis (the lights' direct light per texel, what contacts
+    /// bury: `radiant_radiosity::texel_light`), kept while the mesh, the atlas, the lights and
+    /// the alpha modes stay the same, so a material edit recomposes the map without a ray.
+    basis: Option<BasisCache>,
+    /// A basis being made in the background (light maps over [`BASIS_AT_ONCE`] texels).
+    pending_basis: Option<(BasisCache, Task<TexelBasis>)>,
+    /// Whether the last light map was composed on its basis.
+    drawn_per_texel: bool,
     pending_overlay: Option<Option<Arc<dyn radiant_post::overlay::Overlay>>>,
 }
 
+/// The default of [`RenderSettings::basis_at_once`]: 1 M texels (about 0.75 s of rays).
+pub const BASIS_AT_ONCE: u64 = 1 << 20;
+
+/// A [`TexelBasis`] and what it was made for.
+struct BasisCache {
+    mesh: Arc<Mesh>,
+    atlas: radiant_scene::atlas::Atlas,
+    lights: Vec<radiant_scene::Light>,
+    alpha: Vec<radiant_scene::AlphaMode>,
+    basis: Option<Arc<TexelBasis>>,
+}
+
+impl BasisCache {
+    fn new(mesh: &Arc<Mesh>, atlas: &radiant_scene::atlas::Atlas, scene: &Scene) -> BasisCache {
+        BasisCache {
+            mesh: Arc::clone(mesh),
+            atlas: atlas.clone(),
+            lights: scene.lights.clone(),
+            alpha: scene.surfaces.iter().map(|s| s.alpha).collect(),
+            basis: None,
+        }
+    }
+
+    /// Whether it was made for `mesh`, `atlas` and `scene`.
+    fn holds(&self, mesh: &Arc<Mesh>, atlas: &radiant_scene::atlas::Atlas, scene: &Scene) -> bool {
+        Arc::ptr_eq(&self.mesh, mesh)
+            && self.atlas == *atlas
+            && self.lights == scene.lights
+            && self
+                .alpha
+                .iter()
+                .eq(scene.surfaces.iter().map(|s| &s.alpha))
+    }
+}
+
+/// The basis of `scene`'s light map on `atlas` for bakes on `mesh` (rays against the bake's
+/// BVH, as `radiant_radiosity::texel_light` casts them).
+fn make_basis(scene: &Scene, atlas: &radiant_scene::atlas::Atlas, mesh: &Mesh) -> TexelBasis {
+    let masks = radiant_radiosity::input::masks(&radiant_radiosity::input::static_scene(scene));
+    let bvh = radiant_radiosity::input::visibility(mesh, masks.as_ref());
+    TexelBasis::new(scene, atlas, mesh, bvh)
+}
+
+/// The basis for `mesh`, `atlas` and `scene`: the kept one, one made now (small maps), or
+/// `None` while one is made in the background.
+fn basis_for(
+    state: &mut RenderState,
+    (scene, atlas, mesh): (&Scene, &radiant_scene::atlas::Atlas, &Arc<Mesh>),
+    at_once: u64,
+) -> Option<Arc<TexelBasis>> {
+    if let Some(c) = state.basis.as_ref().filter(|c| c.holds(mesh, atlas, scene)) {
+        return c.basis.clone();
+    }
+    let texels = u64::from(atlas.width) * u64::from(atlas.height) * u64::from(atlas.pages);
+    if texels <= at_once {
+        let basis = Arc::new(make_basis(scene, atlas, mesh));
+        let mut c = BasisCache::new(mesh, atlas, scene);
+        c.basis = Some(Arc::clone(&basis));
+        state.basis = Some(c);
+        return Some(basis);
+    }
+    if !state
+        .pending_basis
+        .as_ref()
+        .is_some_and(|(c, _)| c.holds(mesh, atlas, scene))
+    {
+        let key = BasisCache::new(mesh, atlas, scene);
+        let (scene, atlas, mesh) = (scene.clone(), atlas.clone(), Arc::clone(mesh));
+        let pool = AsyncComputeTaskPool::get_or_init(TaskPool::new);
+        let task = pool.spawn(async move { make_basis(&scene, &atlas, &mesh) });
+        state.pending_basis = Some((key, task));
+    }
+    None
+}
+
 impl RenderState {
+    /// Whether the light map drawn last was composed on its per-texel basis (see
+    /// [`RenderSettings::basis_at_once`]), not from the elements alone while one is made.
+    pub fn light_map_per_texel(&self) -> bool {
+        self.drawn_per_texel
+    }
+
     /// The compiled graph's report, once a frame was drawn.
     pub fn graph(&self) -> Option<&radiant_render::graph::GraphReport> {
         self.renderer.as_ref().and_then(|r| r.report())
@@ -161,8 +258,29 @@ impl Plugin for RenderPlugin {
     }
 }
 
+/// Fills a light map made by `RenderScene::from_scene(scene, ..)` with the light map a bake
+/// writes (`radiant_radiosity::texel_light`): the whole light of `field` (the bake's smooth
+/// field on `mesh`) composed on `basis` (the lights' direct light per texel, the open part of
+/// texels at contacts), so the frame shows what `lightmap.exr`, the export and `bake --points`
+/// hold; then [`set_lightmap`]. The bake's radiosity already holds the punctual lights' direct
+/// light, with shadows: [`lit_by_bake`] removes them from the frame.
+pub fn fill_lightmap(
+    rs: &mut RenderScene,
+    scene: &Scene,
+    mesh: &Mesh,
+    field: &SmoothField,
+    basis: &TexelBasis,
+) {
+    let Some(atlas) = rs.atlas.clone() else {
+        return;
+    };
+    let map = basis.compose(scene, &atlas, mesh, field);
+    set_lightmap(rs, scene, &atlas, &map);
+}
+
 /// Fills a light map made by `RenderScene::from_scene(scene, ..)` with the bake's incident
-/// radiance `H` at each texel's point, from the smooth field (`radiant_radiosity::smooth`:
+/// radiance `H` at each texel's point from the elements alone (what frames draw while a large
+/// map's [`TexelBasis`] is made; [`fill_lightmap`] otherwise), from the smooth field (`radiant_radiosity::smooth`:
 /// `H` averaged at element vertices and interpolated), so the renderer's `albedo × H + E`
 /// reproduces the smooth radiosity `E + ρ H`. On an untextured surface `H` is scaled by
 /// `ρ / ρ̃`, `ρ̃` the albedo as the 8-bit G-buffer stores it, so the frame gives the baked value
@@ -171,7 +289,12 @@ impl Plugin for RenderPlugin {
 ///
 /// The bake's radiosity already holds the punctual lights' direct light, with shadows, so a
 /// frame drawn from this light map must not add the lights again: [`lit_by_bake`] removes them.
-pub fn fill_lightmap(rs: &mut RenderScene, scene: &Scene, mesh: &Mesh, field: &SmoothField) {
+pub fn fill_lightmap_from_field(
+    rs: &mut RenderScene,
+    scene: &Scene,
+    mesh: &Mesh,
+    field: &SmoothField,
+) {
     let to_root = radiant_radiosity::lightmap::static_roots(scene);
     rs.fill_lightmap(|t| {
         let (Some(tri), Some(Some(root))) =
@@ -326,7 +449,19 @@ fn build_scene(
     if let (Some(mesh), Some(field)) = (&lit.mesh, &lit.field)
         && !lit.radiosity.is_empty()
     {
-        fill_lightmap(&mut rs, &scene, mesh, field);
+        let basis = match rs.atlas.clone() {
+            Some(atlas) => basis_for(
+                &mut world.resource_mut::<RenderState>(),
+                (&scene, &atlas, mesh),
+                settings.basis_at_once,
+            ),
+            None => None,
+        };
+        world.resource_mut::<RenderState>().drawn_per_texel = basis.is_some();
+        match basis {
+            Some(basis) => fill_lightmap(&mut rs, &scene, mesh, field, &basis),
+            None => fill_lightmap_from_field(&mut rs, &scene, mesh, field),
+        }
         lit_by_bake(&mut rs);
     }
     let atlas = rs.atlas.as_ref().map(|a| AtlasReport {
@@ -448,6 +583,21 @@ pub fn prepare_frame(world: &mut World) -> Result<bool, RenderError> {
         return Ok(false);
     }
     let settings = *world.resource::<RenderSettings>();
+    // A basis made in the background: keep it and draw the light map again with it.
+    let ready = {
+        let mut state = world.resource_mut::<RenderState>();
+        match state.pending_basis.as_mut().map(|(_, t)| check_ready(t)) {
+            Some(Some(basis)) => state.pending_basis.take().map(|(mut key, _)| {
+                key.basis = Some(Arc::new(basis));
+                key
+            }),
+            _ => None,
+        }
+    };
+    if let Some(c) = ready {
+        world.resource_mut::<RenderState>().basis = Some(c);
+        world.resource_mut::<RenderChanges>().scene = true;
+    }
     let changes = std::mem::replace(
         &mut *world.resource_mut::<RenderChanges>(),
         RenderChanges {

@@ -192,3 +192,132 @@ fn an_empty_world_renders_nothing_and_reports_no_error() {
     assert_eq!((state.frames, state.uploads), (0, 0));
     assert!(state.error.is_none(), "{:?}", state.error);
 }
+
+/// A world's frame shows the light map the bake writes: a black box on a floor under a low
+/// sun, with elements as coarse as a level's (half a metre), casts a shadow as sharp as the
+/// texels once the light map's basis is made: at once (a small map), or in the background
+/// (`basis_at_once: 0`), the frames drawing the elements' light until then.
+#[test]
+fn the_worlds_frame_shows_a_sharp_sun_shadow_whatever_the_elements() {
+    for at_once in [radiant_ecs::render::BASIS_AT_ONCE, 0] {
+        sharp_sun_shadow(at_once);
+    }
+}
+
+fn sharp_sun_shadow(at_once: u64) {
+    use glam::DVec3;
+    use radiant_radiosity::scenes::{add_surface, box_triangles, quad};
+    use radiant_scene::{Camera, Light, LightKind, Scene};
+    radiant_render::GpuContext::headless().unwrap_or_else(|e| {
+        panic!("GPU tests need an adapter: {e}. Run tools/test.sh, which installs lavapipe.")
+    });
+    let rho = 153.0 / 255.0; // stored exactly by the 8-bit G-buffer
+    let mut scene = Scene::default();
+    let floor = quad(
+        DVec3::new(-1.0, 0.0, 1.0),
+        DVec3::X * 2.0,
+        DVec3::NEG_Z * 2.0,
+    );
+    add_surface(&mut scene, "floor", [rho; 3], [0.0; 3], &floor);
+    let (lo, hi) = (DVec3::new(-0.3, 0.0, -0.3), DVec3::new(0.3, 0.4, 0.3));
+    add_surface(
+        &mut scene,
+        "box",
+        [0.0; 3],
+        [0.0; 3],
+        &box_triangles(lo, hi, false),
+    );
+    let direction = DVec3::new(1.0, -2.0, 0.0).normalize();
+    scene.lights.push(Light {
+        name: "sun".into(),
+        kind: LightKind::Directional,
+        position: DVec3::ZERO,
+        direction,
+        color: [1.0; 3],
+        intensity: std::f64::consts::PI / -direction.y,
+        range: None,
+    });
+    let (height, tan) = (3.0, 0.3f64.tan());
+    scene.camera = Some(Camera {
+        position: DVec3::new(0.0, height, 0.0),
+        forward: DVec3::NEG_Y,
+        up: DVec3::NEG_Z,
+        yfov: 0.6,
+    });
+    let n = 129;
+    let mut app = App::new();
+    app.add_plugins(RadiantPlugins)
+        .add_plugins(RenderPlugin)
+        .insert_resource(RenderSettings {
+            size: (n, n),
+            texel_density: Some(64.0),
+            capture: true,
+            basis_at_once: at_once,
+            ..RenderSettings::default()
+        });
+    let mut params = BakeParams::default();
+    params.mesh.patch_size = 0.5;
+    params.mesh.element_levels = 0;
+    app.insert_resource(RadiosityBake {
+        params,
+        ..RadiosityBake::default()
+    });
+    spawn_scene(&mut app.world, &scene);
+    let t = std::time::Instant::now();
+    app.run_until(u64::MAX, Duration::from_millis(1), |w| {
+        (w.resource::<BakeStatus>().phase == BakePhase::Converged
+            && !w.resource::<BakeStatus>().stale
+            && w.resource::<RenderState>().light_map_per_texel())
+            || t.elapsed() > Duration::from_secs(60)
+    });
+    app.update();
+    assert!(
+        app.world.resource::<RenderState>().light_map_per_texel(),
+        "at once up to {at_once} texels: no per-texel light map after {:?}",
+        t.elapsed()
+    );
+    let img = app
+        .world
+        .resource::<LastFrame>()
+        .hdr
+        .clone()
+        .expect("captured");
+    let (mut lit, mut shade, mut wrong) = (0, 0, Vec::new());
+    for j in 0..n {
+        for i in 0..n {
+            let ndc = |k: u32| (f64::from(k) + 0.5) / f64::from(n) * 2.0 - 1.0;
+            let (x, z) = (ndc(i) * tan * height, ndc(j) * tan * height);
+            // Off the box's footprint by more than its top's overhang, inside the floor, and
+            // two texels or more from the shadow's edge (x = 0.5).
+            let off_box = (lo.x - x).max(x - hi.x).max((lo.z - z).max(z - hi.z));
+            let off_shadow = (lo.x - x)
+                .max(x - (hi.x + 0.2))
+                .max((lo.z - z).max(z - hi.z));
+            if off_box < 0.075 || x.abs() > 0.95 || z.abs() > 0.95 || off_shadow.abs() < 0.03 {
+                continue;
+            }
+            let got = f64::from(img.texels[(j * n + i) as usize][0]);
+            let ok = if off_shadow > 0.0 {
+                lit += 1;
+                (got - rho).abs() <= 0.03 * rho
+            } else {
+                shade += 1;
+                got <= 0.03 * rho
+            };
+            if !ok {
+                wrong.push((x, z, got));
+            }
+        }
+    }
+    assert!(
+        lit > 5000 && shade > 150,
+        "{lit} lit, {shade} shaded pixels"
+    );
+    assert!(
+        wrong.is_empty(),
+        "{} of {} floor pixels wrong: {:?}",
+        wrong.len(),
+        lit + shade,
+        &wrong[..wrong.len().min(6)]
+    );
+}

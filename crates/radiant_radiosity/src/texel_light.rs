@@ -318,6 +318,88 @@ impl<V: Visibility> TexelLights<V> {
     }
 }
 
+/// What a light map on one atlas takes from geometry and lights alone, computed once with
+/// rays and composed with any later light of the same mesh without a ray: per texel where its
+/// light is read and the lights' direct part, per element the direct part to take out of the
+/// field. What a live editor keeps while materials, and so the light, change (32 bytes a
+/// texel).
+#[derive(Clone, Debug)]
+pub struct TexelBasis {
+    /// Per page, each texel's triangle and weights ([`Atlas::owners`]).
+    owners: Vec<Vec<TexelOwner>>,
+    /// Per texel (pages one after the other): where its light is read (NaN: buried) and the
+    /// lights' direct `H`.
+    samples: Vec<([f32; 2], [f32; 3])>,
+    /// Per element, the lights' direct `H` the field holds.
+    element_direct: Vec<Rgb>,
+    /// Per scene triangle, the bake's input triangle.
+    roots: Vec<Option<u32>>,
+}
+
+impl TexelBasis {
+    /// The basis of `scene`'s light map on `atlas`, for bakes on `mesh`, with the rays of
+    /// `vis` (as [`compose_lightmap`] builds it).
+    pub fn new<V: Visibility>(scene: &Scene, atlas: &Atlas, mesh: &Mesh, vis: V) -> TexelBasis {
+        let lights = TexelLights::new(scene, atlas, mesh, vis);
+        let owners: Vec<Vec<TexelOwner>> =
+            (0..atlas.pages).map(|p| atlas.owners(scene, p)).collect();
+        let samples = owners
+            .par_iter()
+            .flat_map_iter(|page| page.iter())
+            .map(|o| {
+                if o.triangle == u32::MAX {
+                    return ([f32::NAN; 2], [0.0; 3]);
+                }
+                let s = lights.sample(o.triangle as usize, o.u, o.v);
+                let at = s.at.map_or([f32::NAN; 2], |(a, b)| [a, b]);
+                (at, s.direct.map(|x| x as f32))
+            })
+            .collect();
+        TexelBasis {
+            element_direct: lights.element_direct(mesh),
+            owners,
+            samples,
+            roots: static_roots(scene),
+        }
+    }
+
+    /// The light map of `field` (the whole light of a bake on the basis's mesh: its smooth
+    /// field, as [`SmoothField::new`] or [`crate::smooth::exposed_field`] makes it), as
+    /// [`compose_lightmap`] composes it (the lights' direct part rounded to `f32` first).
+    pub fn compose(
+        &self,
+        scene: &Scene,
+        atlas: &Atlas,
+        mesh: &Mesh,
+        field: &SmoothField,
+    ) -> LightMap {
+        let rest = field.minus(&self.element_direct);
+        fill(
+            scene,
+            atlas,
+            |page| {
+                Cow::Borrowed(
+                    self.owners
+                        .get(page as usize)
+                        .map_or(&[][..], Vec::as_slice),
+                )
+            },
+            |k, _| {
+                let (at, direct) = self
+                    .samples
+                    .get(k)
+                    .copied()
+                    .unwrap_or(([f32::NAN; 2], [0.0; 3]));
+                TexelSample {
+                    at: (!at[0].is_nan()).then_some((at[0], at[1])),
+                    direct: direct.map(f64::from),
+                }
+            },
+            |triangle, at| rest_at(mesh, &self.roots, &rest, triangle, at),
+        )
+    }
+}
+
 /// `H` of the field `rest` on scene triangle `triangle` at weights `at` (0 off the bake).
 fn rest_at(
     mesh: &Mesh,

@@ -193,3 +193,52 @@ fn without_punctual_lights_or_contacts_the_map_is_the_smooth_fields() {
     assert!(old.texels.iter().any(|t| t[0] > 0.1), "the floor is lit");
     assert!(old == new);
 }
+
+/// A basis made once (the rays) composes the same light map as `compose_lightmap` for the
+/// bake's light (the lights' direct part rounded to f32 first), and again for other light on
+/// the same mesh without a ray: what a live editor keeps while a material changes.
+#[test]
+fn a_basis_composes_the_bakes_light_map_and_later_light_without_rays() {
+    use radiant_radiosity::texel_light::TexelBasis;
+    let (lo, hi) = (DVec3::new(0.3, 0.0, 0.35), DVec3::new(0.62, 0.25, 0.71));
+    let mut scene = Scene::default();
+    floor(&mut scene);
+    add_surface(
+        &mut scene,
+        "box",
+        [0.4; 3],
+        [0.0; 3],
+        &box_triangles(lo, hi, false),
+    );
+    let mut sun = sun_down();
+    sun.direction = DVec3::new(0.3, -1.0, 0.2).normalize();
+    scene.lights.push(sun);
+    let r = common::bake(&scene, &BakeParams::default());
+    let atlas = Atlas::new(&scene, Some(DENSITY)).expect("atlas");
+    let bvh = radiant_radiosity::input::visibility(&r.mesh, None);
+    let basis = TexelBasis::new(&scene, &atlas, &r.mesh, bvh);
+    let field = SmoothField::new(&r.mesh, &r.system, &scene.surfaces, &r.radiosity);
+    let from_basis = basis.compose(&scene, &atlas, &r.mesh, &field);
+    let direct = compose_lightmap(&scene, &atlas, &r.mesh, &r.system, &r.radiosity);
+    let worst = from_basis
+        .texels
+        .iter()
+        .zip(&direct.texels)
+        .flat_map(|(a, b)| (0..3).map(move |c| (a[c] - b[c]).abs() / b[c].abs().max(1e-3)))
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-5, "worst relative difference {worst}");
+    // Half the light: the same map less half its field part, the sun's part unchanged.
+    let half: Vec<[f64; 3]> = r.radiosity.iter().map(|b| b.map(|x| 0.5 * x)).collect();
+    let field = SmoothField::new(&r.mesh, &r.system, &scene.surfaces, &half);
+    let dimmer = basis.compose(&scene, &atlas, &r.mesh, &field);
+    let (sum, sum_half): (f64, f64) = direct
+        .texels
+        .iter()
+        .zip(&dimmer.texels)
+        .map(|(a, b)| (f64::from(a[0]), f64::from(b[0])))
+        .fold((0.0, 0.0), |s, (a, b)| (s.0 + a, s.1 + b));
+    assert!(
+        sum_half < sum && sum_half > 0.5 * sum,
+        "{sum_half} of {sum}"
+    );
+}
