@@ -404,18 +404,31 @@ fn export(job: &Job, map: &lightmap::LightMap, path: &Path) -> anyhow::Result<se
     };
     let r = export_gltf(&job.scene, Some(lightmap), path)?;
     println!(
-        "exported {} ({} primitives, light-map textures {:?}, {:.2} MB) in {:.2} s",
+        "exported {} ({} primitives, light-map textures {:?}, {:.2} MB) in {:.2} s; the light map in full range beside it: {}",
         path.display(),
         r.primitives,
         r.lightmap_textures,
         r.bytes as f64 / 1e6,
-        lap.elapsed().as_secs_f64()
+        lap.elapsed().as_secs_f64(),
+        r.hdr_files
+            .iter()
+            .zip(&r.hdr_bytes)
+            .map(|(f, b)| format!(
+                "{} ({:.2} MB)",
+                f.file_name()
+                    .map_or_else(String::new, |n| n.to_string_lossy().into_owned()),
+                *b as f64 / 1e6
+            ))
+            .collect::<Vec<_>>()
+            .join(", ")
     );
     Ok(json!({
         "path": path.display().to_string(),
         "primitives": r.primitives,
         "lightmap_textures": r.lightmap_textures,
         "lightmap_scale": r.lightmap_scale,
+        "hdr_files": r.hdr_files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>(),
+        "hdr_bytes": r.hdr_bytes,
         "bytes": r.bytes,
         "seconds": lap.elapsed().as_secs_f64(),
     }))

@@ -724,6 +724,28 @@ fn bake_exports_binary_gltf_that_the_khronos_validator_accepts() {
             .len() as u64,
         pages
     );
+    // Each page in full range beside the .glb, KTX2 and EXR, named in report.json; the EXR
+    // page equals its rows of lightmap.exr.
+    let hdr = report["parameters"]["export"]["hdr_files"]
+        .as_array()
+        .expect("hdr_files");
+    assert_eq!(hdr.len() as u64, 2 * pages);
+    for p in 0..pages {
+        assert!(out.join(format!("cornell_lightmap_{p}.ktx2")).is_file());
+        let page = image::open(out.join(format!("cornell_lightmap_{p}.exr")))
+            .expect("page's exr")
+            .to_rgb32f();
+        let all = image::open(out.join("lightmap.exr"))
+            .expect("lightmap.exr")
+            .to_rgb32f();
+        for (x, y, px) in page.enumerate_pixels().step_by(37) {
+            assert_eq!(
+                px,
+                all.get_pixel(x, y + 64 * p as u32),
+                "page {p} at {x},{y}"
+            );
+        }
+    }
     // lightmap.exr stacks the pages top to bottom.
     let exr = image::open(out.join("lightmap.exr")).expect("lightmap.exr");
     assert_eq!(

@@ -12,8 +12,12 @@
 //! channel) stands for the incident radiance `H = scale · srgb_to_linear(t)`, so a surface of
 //! base colour `a` reflects `a · H` (glTF emissive units). A surface whose charts lie on several
 //! pages is one mesh with a primitive per page. Each baked primitive names its page in its
-//! `extras`: `{"lightmap": {"texture": T, "texCoord": 1, "scale": S, "encoding": "srgb"}}`, `T`
-//! the index into `textures`. Punctual lights are not written: their light is in the light map.
+//! `extras`: `{"lightmap": {"texture": T, "texCoord": 1, "scale": S, "encoding": "srgb", "ktx2":
+//! K, "exr": X}}`, `T` the index into `textures`. The same page is written in full range beside
+//! the `.glb` (`crate::hdr_lightmap`): `K`, `STEM_lightmap[_P].ktx2` (RGBA16F, zstd), and `X`,
+//! `STEM_lightmap[_P].exr` (32-bit float), URIs relative to the `.glb`, whose texels are `H`
+//! itself (no scale, no sRGB). Punctual lights are not written: their light is in the light
+//! map.
 
 use std::path::Path;
 
@@ -42,6 +46,10 @@ pub struct ExportReport {
     pub lightmap_textures: Vec<usize>,
     /// The light map's scale (`H = scale · srgb_to_linear(texel)`).
     pub lightmap_scale: f32,
+    /// The full-range pages written beside the `.glb`, KTX2 then EXR for each page.
+    pub hdr_files: Vec<std::path::PathBuf>,
+    /// Their bytes, in the same order.
+    pub hdr_bytes: Vec<usize>,
     /// Bytes written.
     pub bytes: usize,
 }
@@ -99,8 +107,16 @@ pub fn export_gltf(
     } else {
         DVec3::ZERO
     };
-    // The light map's pages, one texture each, with one scale.
+    // The light map's pages, one texture each, with one scale; and each in full range beside
+    // the file.
     let mut page_textures = Vec::new();
+    let mut page_hdr: Vec<(String, String)> = Vec::new();
+    let mut hdr_files = Vec::new();
+    let mut hdr_bytes = Vec::new();
+    let stem = path
+        .file_stem()
+        .map_or_else(|| "scene".into(), |s| s.to_string_lossy().into_owned());
+    let dir = path.parent().unwrap_or_else(|| Path::new(""));
     let mut lightmap_scale = 0.0f32;
     if let Some(lm) = &lightmap {
         let peak = lm
@@ -143,6 +159,20 @@ pub fn export_gltf(
             } else {
                 "lightmap".to_string()
             };
+            let (ktx2, exr) = (format!("{stem}_{name}.ktx2"), format!("{stem}_{name}.exr"));
+            let (width, height) = (lm.atlas.width, lm.atlas.height);
+            for (file, bytes) in [
+                (
+                    &ktx2,
+                    crate::hdr_lightmap::ktx2_rgba16f(width, height, page)?,
+                ),
+                (&exr, crate::hdr_lightmap::exr_rgb32f(width, height, page)?),
+            ] {
+                write_atomic(&dir.join(file), &bytes)?;
+                hdr_files.push(dir.join(file));
+                hdr_bytes.push(bytes.len());
+            }
+            page_hdr.push((ktx2, exr));
             let image = w.image(&mut root, png, &name);
             page_textures.push(root.push(json::Texture {
                 name: Some(name),
@@ -286,7 +316,11 @@ pub fn export_gltf(
                 material,
                 page_textures
                     .get(page as usize)
-                    .map(|&t| (t, lightmap_scale)),
+                    .map(|&texture| LightmapRef {
+                        texture,
+                        scale: lightmap_scale,
+                        hdr: &page_hdr[page as usize],
+                    }),
             )?);
         }
         primitives += prims.len();
@@ -321,8 +355,18 @@ pub fn export_gltf(
         primitives,
         lightmap_textures: page_textures.iter().map(|t| t.value()).collect(),
         lightmap_scale,
+        hdr_files,
+        hdr_bytes,
         bytes: bytes.len(),
     })
+}
+
+/// A primitive's light-map page: its texture, the PNG's scale and the full-range files.
+struct LightmapRef<'a> {
+    texture: json::Index<json::Texture>,
+    scale: f32,
+    /// The page's KTX2 and EXR, relative to the `.glb`.
+    hdr: &'a (String, String),
 }
 
 /// What a primitive's vertices need besides its triangles.
@@ -344,7 +388,7 @@ fn primitive(
     tris: &[usize],
     v: Vertices<'_>,
     material: json::Index<json::Material>,
-    lightmap: Option<(json::Index<json::Texture>, f32)>,
+    lightmap: Option<LightmapRef<'_>>,
 ) -> Result<json::mesh::Primitive, SceneError> {
     let (origin, tex) = (v.origin, v.tex);
     let mut pos = Vec::with_capacity(tris.len() * 9);
@@ -398,12 +442,14 @@ fn primitive(
             Checked::Valid(json::mesh::Semantic::TexCoords(1)),
             w.accessor(root, &uv1, count, json::accessor::Type::Vec2, false),
         );
-        if let Some((texture, scale)) = lightmap {
+        if let Some(lm) = lightmap {
             let e = serde_json::json!({ "lightmap": {
-                "texture": texture.value(),
+                "texture": lm.texture.value(),
                 "texCoord": 1,
-                "scale": scale,
+                "scale": lm.scale,
                 "encoding": "srgb",
+                "ktx2": lm.hdr.0,
+                "exr": lm.hdr.1,
             }});
             extras = Some(
                 serde_json::value::RawValue::from_string(e.to_string())
@@ -597,6 +643,28 @@ impl Writer {
 mod tests {
     use super::*;
 
+    /// A KTX2 light map's texels as a loader reads them: the `ktx2` crate's reader, `ruzstd`'s
+    /// decoder (Bevy's), `half`.
+    fn decode_ktx2(file: &[u8]) -> Vec<[f32; 4]> {
+        let reader = ktx2::Reader::new(file).expect("a valid KTX2 file");
+        assert_eq!(
+            reader.header().format,
+            Some(ktx2::Format::R16G16B16A16_SFLOAT)
+        );
+        let level = reader.levels().next().expect("a level");
+        let mut raw = Vec::new();
+        std::io::Read::read_to_end(
+            &mut ruzstd::decoding::StreamingDecoder::new(level.data).expect("zstd"),
+            &mut raw,
+        )
+        .expect("decodes");
+        raw.chunks_exact(8)
+            .map(|t| {
+                std::array::from_fn(|c| half::f16::from_le_bytes([t[2 * c], t[2 * c + 1]]).to_f32())
+            })
+            .collect()
+    }
+
     #[test]
     fn a_round_trip_reads_back_the_scene_its_light_map_uvs_and_the_light_map() {
         let scene = crate::builtin("cornell-box").expect("builtin");
@@ -676,6 +744,29 @@ mod tests {
             assert_eq!(extras["lightmap"]["texture"], serde_json::json!(t));
             assert_eq!(extras["lightmap"]["texCoord"], serde_json::json!(1));
             assert_eq!(extras["lightmap"]["encoding"], "srgb");
+            assert_eq!(extras["lightmap"]["ktx2"], "cornell_lightmap.ktx2");
+            assert_eq!(extras["lightmap"]["exr"], "cornell_lightmap.exr");
+        }
+        // The full-range page beside it, as a loader decodes it: H itself, within f16's
+        // precision (KTX2) and exactly (EXR).
+        assert_eq!(
+            r.hdr_files,
+            [
+                dir.join("cornell_lightmap.ktx2"),
+                dir.join("cornell_lightmap.exr")
+            ]
+        );
+        let ktx2 = decode_ktx2(&std::fs::read(&r.hdr_files[0]).expect("ktx2"));
+        let exr = image::open(&r.hdr_files[1]).expect("exr").to_rgb32f();
+        assert_eq!(ktx2.len(), texels.len());
+        for ((want, k), e) in texels.iter().zip(&ktx2).zip(exr.pixels()) {
+            assert_eq!(e.0, *want);
+            for c in 0..3 {
+                assert!(
+                    (k[c] - want[c]).abs() <= 5e-4 * want[c] + 6e-8,
+                    "{k:?} vs {want:?}"
+                );
+            }
         }
         let texture = doc.textures().nth(t).expect("texture");
         let img = &images[texture.source().index()];
@@ -742,7 +833,12 @@ mod tests {
             let got = r.lightmap_scale as f64
                 * radiant_color::srgb_to_linear(f64::from(img.pixels[0]) / 255.0);
             assert!((got - (page as f64 + 1.0)).abs() < 0.02 * r.lightmap_scale as f64);
+            // Each page in full range, exactly its value (small integers are exact in f16).
+            let file = dir.join(format!("paged_lightmap_{page}.ktx2"));
+            let k = decode_ktx2(&std::fs::read(&file).expect("page's ktx2"));
+            assert!(k.iter().all(|t| t[0] == page as f32 + 1.0 && t[3] == 1.0));
         }
+        assert_eq!(r.hdr_files.len(), 2 * paged.pages as usize);
         // A name other engines would not read as binary glTF is refused.
         assert!(matches!(
             export_gltf(&scene, None, &dir.join("cornell.gltf")),

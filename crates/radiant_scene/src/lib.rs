@@ -13,6 +13,7 @@
 pub mod atlas;
 pub mod gltf_export;
 mod gltf_import;
+pub mod hdr_lightmap;
 pub mod sky;
 pub mod texture;
 
