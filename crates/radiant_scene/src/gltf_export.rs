@@ -16,8 +16,10 @@
 //! K, "exr": X}}`, `T` the index into `textures`. The same page is written in full range beside
 //! the `.glb` (`crate::hdr_lightmap`): `K`, `STEM_lightmap[_P].ktx2` (RGBA16F, zstd), and `X`,
 //! `STEM_lightmap[_P].exr` (32-bit float), URIs relative to the `.glb`, whose texels are `H`
-//! itself (no scale, no sRGB). Punctual lights are not written: their light is in the light
-//! map.
+//! itself (no scale, no sRGB), and `quantity` says so in words. The scene's camera is written
+//! (a perspective camera node) and so are its punctual lights (`KHR_lights_punctual`), each
+//! marked `extras.radiant.baked`: their light is in the light map already, so a client that
+//! lights dynamic objects with them must not add it to the static ones.
 
 use std::path::Path;
 
@@ -338,6 +340,22 @@ pub fn export_gltf(
             ..Default::default()
         }));
     }
+    // The camera, so a client renders the same view, and the punctual lights, marked as
+    // already in the light map (`extras.radiant.baked`), for clients that light dynamic
+    // objects with them.
+    if let Some(cam) = &scene.camera {
+        nodes.push(camera_node(&mut root, cam));
+    }
+    if !scene.lights.is_empty() {
+        let lights: Vec<_> = scene.lights.iter().map(light).collect::<Result<_, _>>()?;
+        for (i, l) in scene.lights.iter().enumerate() {
+            nodes.push(light_node(&mut root, l, i as u32));
+        }
+        root.extensions = Some(json::extensions::Root {
+            khr_lights_punctual: Some(json::extensions::root::KhrLightsPunctual { lights }),
+        });
+        root.extensions_used.push("KHR_lights_punctual".into());
+    }
     let scene_index = root.push(json::Scene {
         name: None,
         nodes,
@@ -358,6 +376,93 @@ pub fn export_gltf(
         hdr_files,
         hdr_bytes,
         bytes: bytes.len(),
+    })
+}
+
+/// A node with the scene's camera: perspective, looking along its local −Z with +Y up.
+fn camera_node(root: &mut json::Root, cam: &crate::Camera) -> json::Index<json::Node> {
+    let camera = root.push(json::Camera {
+        name: Some("camera".into()),
+        orthographic: None,
+        perspective: Some(json::camera::Perspective {
+            aspect_ratio: None,
+            yfov: cam.yfov as f32,
+            zfar: None,
+            znear: 0.01,
+            extensions: None,
+            extras: Default::default(),
+        }),
+        type_: Checked::Valid(json::camera::Type::Perspective),
+        extensions: None,
+        extras: Default::default(),
+    });
+    let forward = cam.forward.normalize();
+    let right = forward.cross(cam.up).normalize();
+    let up = right.cross(forward);
+    let rotation = glam::DQuat::from_mat3(&glam::DMat3::from_cols(right, up, -forward));
+    root.push(json::Node {
+        name: Some("camera".into()),
+        camera: Some(camera),
+        translation: Some(cam.position.as_vec3().to_array()),
+        rotation: Some(json::scene::UnitQuaternion(
+            rotation.normalize().as_quat().to_array(),
+        )),
+        ..Default::default()
+    })
+}
+
+/// A punctual light as `KHR_lights_punctual` has it, marked as baked into the light map.
+fn light(
+    l: &crate::Light,
+) -> Result<json::extensions::scene::khr_lights_punctual::Light, SceneError> {
+    use json::extensions::scene::khr_lights_punctual as khr;
+    let (type_, spot) = match l.kind {
+        crate::LightKind::Directional => (khr::Type::Directional, None),
+        crate::LightKind::Point => (khr::Type::Point, None),
+        crate::LightKind::Spot {
+            inner_cone_angle,
+            outer_cone_angle,
+        } => (
+            khr::Type::Spot,
+            Some(khr::Spot {
+                inner_cone_angle: inner_cone_angle as f32,
+                outer_cone_angle: outer_cone_angle as f32,
+            }),
+        ),
+    };
+    let extras = serde_json::json!({ "radiant": { "baked": true } });
+    Ok(khr::Light {
+        color: l.color.map(|c| c as f32),
+        extensions: None,
+        extras: Some(
+            serde_json::value::RawValue::from_string(extras.to_string())
+                .map_err(|e| err(format!("extras: {e}")))?,
+        ),
+        intensity: l.intensity as f32,
+        name: Some(l.name.clone()),
+        range: l.range.map(|r| r as f32),
+        spot,
+        type_: Checked::Valid(type_),
+    })
+}
+
+/// A node holding light `index`: at its position, its local −Z along its direction.
+fn light_node(root: &mut json::Root, l: &crate::Light, index: u32) -> json::Index<json::Node> {
+    let rotation = glam::DQuat::from_rotation_arc(DVec3::NEG_Z, l.direction.normalize());
+    root.push(json::Node {
+        name: Some(l.name.clone()),
+        translation: Some(l.position.as_vec3().to_array()),
+        rotation: Some(json::scene::UnitQuaternion(
+            rotation.normalize().as_quat().to_array(),
+        )),
+        extensions: Some(json::extensions::scene::Node {
+            khr_lights_punctual: Some(
+                json::extensions::scene::khr_lights_punctual::KhrLightsPunctual {
+                    light: json::Index::new(index),
+                },
+            ),
+        }),
+        ..Default::default()
     })
 }
 
@@ -444,12 +549,14 @@ fn primitive(
         );
         if let Some(lm) = lightmap {
             let e = serde_json::json!({ "lightmap": {
+                "quantity": "H, incident radiance (irradiance / pi): outgoing = baseColor * H + emissive, in glTF emissive units",
                 "texture": lm.texture.value(),
                 "texCoord": 1,
                 "scale": lm.scale,
                 "encoding": "srgb",
                 "ktx2": lm.hdr.0,
                 "exr": lm.hdr.1,
+                "hdrEncoding": "linear",
             }});
             extras = Some(
                 serde_json::value::RawValue::from_string(e.to_string())
@@ -663,6 +770,90 @@ mod tests {
                 std::array::from_fn(|c| half::f16::from_le_bytes([t[2 * c], t[2 * c + 1]]).to_f32())
             })
             .collect()
+    }
+
+    /// The scene's camera and punctual lights travel into the file and come back as they were
+    /// (the lights marked as baked into the light map).
+    #[test]
+    fn the_camera_and_the_lights_travel_into_the_file() {
+        use crate::{Light, LightKind};
+        let mut scene = crate::builtin("cornell-box").expect("builtin");
+        let cam = scene.camera.expect("the box has a camera");
+        let light = |name: &str, kind, position: DVec3, direction: DVec3, range| Light {
+            name: name.into(),
+            kind,
+            position,
+            direction: direction.normalize(),
+            intensity: 3.5,
+            color: [1.0, 0.5, 0.25],
+            range,
+        };
+        scene.lights = vec![
+            light(
+                "sun",
+                LightKind::Directional,
+                DVec3::ZERO,
+                DVec3::new(0.3, -1.0, 0.2),
+                None,
+            ),
+            light(
+                "bulb",
+                LightKind::Point,
+                DVec3::new(0.2, 0.4, 0.1),
+                DVec3::NEG_Y,
+                Some(2.0),
+            ),
+            light(
+                "spot",
+                LightKind::Spot {
+                    inner_cone_angle: 0.25, // exact in f32, as glTF stores it
+                    outer_cone_angle: 0.5,
+                },
+                DVec3::new(0.1, 0.5, 0.3),
+                DVec3::new(-0.2, -1.0, 0.1),
+                None,
+            ),
+        ];
+        let dir =
+            std::env::temp_dir().join(format!("radiant_export_lights_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let path = dir.join("lit.glb");
+        export_gltf(&scene, None, &path).expect("export");
+        let bytes = std::fs::read(&path).expect("read back");
+        let back = crate::load_gltf_slice(&bytes).expect("import");
+        let c = back.camera.expect("a camera");
+        let near = |a: DVec3, b: DVec3| (a - b).length() < 1e-5;
+        assert!(near(c.position, cam.position) && near(c.forward, cam.forward.normalize()));
+        assert!(near(c.up, cam.up.normalize()) && (c.yfov - cam.yfov).abs() < 1e-6);
+        assert_eq!(back.lights.len(), 3);
+        for want in &scene.lights {
+            let got = back
+                .lights
+                .iter()
+                .find(|l| l.name == want.name)
+                .expect("the light");
+            assert_eq!(got.kind, want.kind, "{}", want.name);
+            assert!(
+                near(got.direction, want.direction),
+                "{}: {:?}",
+                want.name,
+                got.direction
+            );
+            if !matches!(want.kind, LightKind::Directional) {
+                assert!(near(got.position, want.position), "{}", want.name);
+            }
+            assert_eq!(
+                (got.intensity, got.color, got.range),
+                (want.intensity, want.color, want.range)
+            );
+        }
+        let (doc, _, _) = gltf::import_slice(&bytes).expect("gltf");
+        for l in doc.lights().expect("KHR_lights_punctual") {
+            let extras: serde_json::Value =
+                serde_json::from_str(l.extras().as_ref().expect("extras").get()).expect("json");
+            assert_eq!(extras["radiant"]["baked"], true);
+        }
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
