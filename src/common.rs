@@ -48,13 +48,18 @@ pub(crate) const PROGRESS: &str = "radiant::progress";
 /// Seconds between progress lines in the log when `RADIANT_PROGRESS_SECONDS` does not say.
 const PROGRESS_SECONDS: f64 = 5.0;
 
+/// Driver chatter wgpu relays from probing for adapters (the Vulkan loader's messages, EGL's
+/// platform attempts), logged as errors though nothing failed: off unless `RUST_LOG` asks. A
+/// real failure still reaches the user as Radiant's own one-line error.
+const DRIVER_NOISE: &str = "wgpu_hal::vulkan::instance=off,wgpu_hal::gles::egl=off";
+
 /// The default log filter (`RUST_LOG` replaces it): warnings, and the progress lines where no
-/// bar shows them.
+/// bar shows them; not the drivers' probing ([`DRIVER_NOISE`]).
 pub(crate) fn default_log_filter(stderr_is_terminal: bool) -> String {
     if stderr_is_terminal {
-        "warn".to_string()
+        format!("warn,{DRIVER_NOISE}")
     } else {
-        format!("warn,{PROGRESS}=info")
+        format!("warn,{DRIVER_NOISE},{PROGRESS}=info")
     }
 }
 
@@ -196,7 +201,7 @@ mod tests {
             !rarely.due(),
             "the first line comes a whole interval after the start"
         );
-        assert_eq!(default_log_filter(true), "warn");
+        assert_eq!(default_log_filter(true), format!("warn,{DRIVER_NOISE}"));
         let piped = default_log_filter(false);
         assert!(piped.contains(&format!("{PROGRESS}=info")), "{piped}");
         assert!(

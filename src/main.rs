@@ -350,7 +350,39 @@ fn run_no_arguments() -> anyhow::Result<()> {
     bake_cmd::run_default()
 }
 
+/// Mesa's drivers (lavapipe, llvmpipe) print "error: XDG_RUNTIME_DIR is invalid or not set" on
+/// every device they open where the variable is missing, as on a headless machine, a container
+/// or CI. Before anything else runs, point it at a private directory of this user's (mode 0700,
+/// as the XDG spec asks; one per user, kept between runs) so that nothing but Radiant's own
+/// lines reach standard error.
+#[cfg(unix)]
+fn quiet_mesa() {
+    use std::os::unix::fs::{MetadataExt as _, PermissionsExt as _};
+    let valid =
+        std::env::var_os("XDG_RUNTIME_DIR").is_some_and(|d| std::path::Path::new(&d).is_dir());
+    if valid {
+        return;
+    }
+    let uid = std::fs::metadata("/proc/self").map_or(0, |m| m.uid());
+    let dir = std::env::temp_dir().join(format!("radiant-runtime-{uid}"));
+    let ours = std::fs::create_dir_all(&dir)
+        .and_then(|()| std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700)))
+        .is_ok();
+    if ours {
+        // SAFETY: the first statement of `main`, before any other thread exists, so nothing
+        // reads the environment while it changes.
+        #[allow(unsafe_code)]
+        unsafe {
+            std::env::set_var("XDG_RUNTIME_DIR", &dir);
+        }
+    }
+}
+
+#[cfg(not(unix))]
+fn quiet_mesa() {}
+
 fn main() -> ExitCode {
+    quiet_mesa();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         // Help and version go to stdout as clap writes them.

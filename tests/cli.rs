@@ -890,3 +890,40 @@ fn bake_points_answers_what_the_renderer_shows_against_a_path_tracer() {
         assert!(!bad.join("out/report.json").exists());
     }
 }
+
+/// The README's quick start has the two commands, and CI runs the second: no drift between
+/// what a user is told and what CI does.
+#[test]
+fn the_readme_quick_start_is_what_ci_runs() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let readme = std::fs::read_to_string(root.join("README.md")).expect("README.md");
+    let start = readme.find("## Quick start").expect("a quick start");
+    let block = readme[start..]
+        .split("```")
+        .nth(1)
+        .expect("a code block in the quick start");
+    let commands: Vec<&str> = block
+        .lines()
+        .skip(1)
+        .map(|l| l.split('#').next().unwrap_or("").trim())
+        .filter(|l| !l.is_empty())
+        .collect();
+    assert_eq!(commands, ["cargo run --release", "bash tools/test.sh"]);
+    let ci = std::fs::read_to_string(root.join(".ci/run")).expect(".ci/run");
+    let run: Vec<&str> = ci
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with('#'))
+        .filter(|l| l.contains("tools/"))
+        .collect();
+    assert_eq!(run, ["exec bash tools/test.sh"], "{ci}");
+    assert!(
+        readme.lines().count() <= 250,
+        "the README is for users: at most 250 lines"
+    );
+    let arch = std::fs::read_to_string(root.join("ARCHITECTURE.md")).expect("ARCHITECTURE.md");
+    assert!(
+        arch.lines().count() <= 400,
+        "ARCHITECTURE.md is a map: at most 400 lines"
+    );
+}

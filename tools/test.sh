@@ -3,7 +3,8 @@
 #
 # Needs: the Rust toolchain pinned in rust-toolchain.toml (1.95.0, with rustfmt and clippy), a C
 # compiler for build scripts, a Vulkan driver for the GPU tests: with no GPU, Mesa's
-# software rasteriser lavapipe (Debian: mesa-vulkan-drivers), and Xvfb and xwd for the window
+# software rasteriser lavapipe (Debian: mesa-vulkan-drivers), Mesa's GL drivers for the GL
+# backend test (libegl-mesa0 libgl1-mesa-dri), and Xvfb and xwd for the window
 # test (Debian: xvfb x11-apps). As root with apt, this script
 # installs what is missing; otherwise it says what to install. Builds once, in the dev profile
 # (dependencies optimised, see Cargo.toml), and reuses that build for all tests.
@@ -39,6 +40,22 @@ if ! have_vulkan; then
   else
     echo "the GPU tests need a Vulkan driver. With no GPU, install Mesa's lavapipe:" >&2
     echo "  sudo apt-get install mesa-vulkan-drivers libvulkan1" >&2
+    exit 1
+  fi
+fi
+# The GL backend test renders through Mesa's llvmpipe GL (EGL, surfaceless), as a machine
+# without a Vulkan driver would.
+have_gl() {
+  { ldconfig -p 2>/dev/null | grep 'libEGL_mesa\.so\.0' >/dev/null; } &&
+    compgen -G '/usr/lib/*/dri/swrast_dri.so' >/dev/null
+}
+if ! have_gl; then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    say "installing Mesa's GL drivers (llvmpipe through EGL) for the GL backend test"
+    apt-get update -qq && apt-get install -y -qq --no-install-recommends libegl1 libegl-mesa0 libgl1-mesa-dri
+  else
+    echo "the GL backend test needs Mesa's GL drivers. Install them with:" >&2
+    echo "  sudo apt-get install libegl1 libegl-mesa0 libgl1-mesa-dri" >&2
     exit 1
   fi
 fi

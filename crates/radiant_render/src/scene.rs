@@ -1158,6 +1158,14 @@ fn lightmap_texels(
         }
         .into());
     }
+    // wgpu's GL backend decides a texture's view dimension when it creates it, and takes a
+    // one-layer texture for `D2`: the shaders' `texture_2d_array` then reads black. A second,
+    // empty layer makes it an array there (never read: no vertex names page 1).
+    if gpu.info.backend == wgpu::Backend::Gl && layers == 1 {
+        let mut data = data;
+        data.resize(data.len() * 2, 0);
+        return Ok((lw, lh, 2, data));
+    }
     Ok((lw, lh, layers, data))
 }
 

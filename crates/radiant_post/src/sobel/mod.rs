@@ -77,7 +77,8 @@ impl SobelPipeline {
     /// Declares the bindings; pipelines compile on first use per format.
     pub fn new(device: &wgpu::Device) -> Self {
         let (tex, no) = (Slot::Texture(UNFILTERABLE), Slot::Unused);
-        let depth = Slot::Texture(wgpu::TextureSampleType::Depth);
+        // Depth bound as unfilterable float, which every backend (GL's GLSL included) loads.
+        let depth = Slot::Texture(UNFILTERABLE);
         let make =
             |label, slots: &[Slot]| FullscreenEffect::new(device, label, shader_source(), slots);
         Self {

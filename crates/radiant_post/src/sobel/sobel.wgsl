@@ -4,7 +4,9 @@
 
 @group(0) @binding(0) var color_in: texture_2d<f32>;
 @group(0) @binding(1) var normal_in: texture_2d<f32>;
-@group(0) @binding(2) var depth_in: texture_depth_2d;
+// Depth as an unfilterable float texture, read with textureLoad: what GLSL (wgpu's GL
+// backend) can read; a `texture_depth_2d` cannot be loaded from there.
+@group(0) @binding(2) var depth_in: texture_2d<f32>;
 @group(0) @binding(3) var<uniform> sobel: SobelSettings;
 
 struct SobelSettings {
@@ -54,10 +56,10 @@ fn linear_depth(d: f32) -> f32 {
 fn sobel_depth_fs(in: FullscreenOut) -> @location(0) vec4<f32> {
     let size = vec2<i32>(textureDimensions(depth_in));
     let px = vec2<i32>(in.position.xy);
-    let centre = linear_depth(textureLoad(depth_in, px, 0));
+    let centre = linear_depth(textureLoad(depth_in, px, 0).r);
     var g = vec2<f32>(0.0);
     for (var k = 0; k < 9; k++) {
-        let v = linear_depth(textureLoad(depth_in, clamp_px(px + offsets(k), size), 0));
+        let v = linear_depth(textureLoad(depth_in, clamp_px(px + offsets(k), size), 0).r);
         g += vec2<f32>(GX[k], GY[k]) * v;
     }
     // Relative to the centre's distance, so the threshold does not depend on scene scale.

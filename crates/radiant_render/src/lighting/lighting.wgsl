@@ -13,7 +13,9 @@
 @group(0) @binding(4) var g_material: texture_2d<f32>;
 @group(0) @binding(5) var g_irradiance: texture_2d<f32>;
 @group(0) @binding(6) var g_emissive: texture_2d<f32>;
-@group(0) @binding(7) var g_depth: texture_depth_2d;
+// Depth as an unfilterable float texture, read with textureLoad: what GLSL (wgpu's GL
+// backend) can read; a `texture_depth_2d` cannot be loaded from there.
+@group(0) @binding(7) var g_depth: texture_2d<f32>;
 @group(0) @binding(8) var ao_texture: texture_2d<f32>;
 @group(0) @binding(9) var out_radiance: texture_storage_2d<rgba16float, write>;
 @group(0) @binding(10) var<uniform> settings: LightingSettings;
@@ -109,7 +111,7 @@ fn lighting_main(
     let size = vec2<u32>(camera.viewport.xy);
     let inside = gid.x < size.x && gid.y < size.y;
     let coord = vec2<i32>(min(gid.xy, size - vec2<u32>(1u)));
-    let depth = textureLoad(g_depth, coord, 0);
+    let depth = textureLoad(g_depth, coord, 0).r;
 
     if (lid == 0u) {
         atomicStore(&tile_min, 0x7f7fffffu);

@@ -106,7 +106,8 @@ impl LightingPipeline {
             source: wgpu::ShaderSource::Wgsl(shader_source().into()),
         });
         let tex = Slot::Texture(UNFILTERABLE);
-        let depth = Slot::Texture(wgpu::TextureSampleType::Depth);
+        // Depth bound as unfilterable float, which every backend (GL's GLSL included) loads.
+        let depth = Slot::Texture(UNFILTERABLE);
         let layout = Arc::new(BindLayout::new(
             device,
             "lighting",

@@ -121,7 +121,8 @@ pub struct SsaoPipeline {
 impl SsaoPipeline {
     /// Declares the bindings; the pipelines compile on first use.
     pub fn new(device: &wgpu::Device) -> Self {
-        let depth = Slot::Texture(wgpu::TextureSampleType::Depth);
+        // Depth bound as unfilterable float, which every backend (GL's GLSL included) loads.
+        let depth = Slot::Texture(UNFILTERABLE);
         let tex = Slot::Texture(UNFILTERABLE);
         Self {
             ssao: FullscreenEffect::new(

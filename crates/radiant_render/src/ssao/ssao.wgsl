@@ -4,7 +4,8 @@
 // the depth buffer, with a range check so distant occluders do not count.
 
 @group(0) @binding(0) var<uniform> camera: Camera;
-@group(0) @binding(1) var g_depth: texture_depth_2d;
+// Depth as an unfilterable float texture (see lighting.wgsl: GLSL cannot load a depth texture).
+@group(0) @binding(1) var g_depth: texture_2d<f32>;
 @group(0) @binding(2) var g_normal: texture_2d<f32>;
 @group(0) @binding(3) var<uniform> ssao: SsaoSettings;
 
@@ -18,7 +19,7 @@ struct SsaoSettings {
 fn ssao_fs(in: FullscreenOut) -> @location(0) vec4<f32> {
     let size = vec2<i32>(camera.viewport.xy);
     let px = vec2<i32>(in.position.xy);
-    let depth = textureLoad(g_depth, px, 0);
+    let depth = textureLoad(g_depth, px, 0).r;
     if (depth >= 1.0) {
         return vec4<f32>(1.0);
     }
@@ -56,7 +57,7 @@ fn ssao_fs(in: FullscreenOut) -> @location(0) vec4<f32> {
             continue;
         }
         let spx = vec2<i32>(suv * camera.viewport.xy);
-        let sd = textureLoad(g_depth, spx, 0);
+        let sd = textureLoad(g_depth, spx, 0).r;
         if (sd >= 1.0) {
             continue;
         }
