@@ -89,6 +89,19 @@ impl Image {
         bytes: &[u8],
         declared: Option<&str>,
     ) -> Result<(Image, Option<String>), ImageError> {
+        Self::decode_within(name, bytes, declared, Self::MAX_TEXELS)
+    }
+
+    /// [`Image::decode`] with at most `max_texels` texels: a larger PNG (not interlaced) is
+    /// read row by row and averaged down by the smallest whole factor that fits (colour in
+    /// linear light), never held whole, with a warning that says so; a larger JPEG or
+    /// interlaced PNG is [`ImageError::TooLarge`].
+    pub fn decode_within(
+        name: &str,
+        bytes: &[u8],
+        declared: Option<&str>,
+        max_texels: u64,
+    ) -> Result<(Image, Option<String>), ImageError> {
         use image::ImageFormat;
         let (format, mime) = if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
             (ImageFormat::Png, "image/png")
@@ -111,7 +124,25 @@ impl Image {
         };
         let corrupt = |e: image::ImageError| ImageError::Corrupt(e.to_string());
         let (width, height) = reader().into_dimensions().map_err(corrupt)?;
-        if u64::from(width) * u64::from(height) > Self::MAX_TEXELS {
+        if u64::from(width) * u64::from(height) > max_texels {
+            let averaged = match format {
+                ImageFormat::Png => png_averaged(name, bytes, max_texels).map_err(|e| {
+                    ImageError::Corrupt(format!("{width}×{height} texels read row by row: {e}"))
+                })?,
+                _ => None,
+            };
+            if let Some((image, k)) = averaged {
+                let side = (max_texels as f64).sqrt().floor() as u64;
+                let note = format!(
+                    "image '{name}': {width}×{height} texels is over the limit of {side}×{side}; averaged down {k}× to {}×{} as it was read",
+                    image.width, image.height
+                );
+                let warning = Some(match warning {
+                    Some(w) => format!("{w}; {note}"),
+                    None => note,
+                });
+                return Ok((image, warning));
+            }
             return Err(ImageError::TooLarge { width, height });
         }
         let decoded = reader().decode().map_err(corrupt)?;
@@ -235,6 +266,71 @@ pub struct TextureRef {
 }
 
 /// sRGB byte → linear, as a table (`f64`, so means are exact to rounding).
+/// A PNG averaged down, read row by row (`png`'s streaming reader, 8 bits per channel): each
+/// texel the mean of a `k × k` block (colour in linear light, alpha as it is), `k` the
+/// smallest that leaves at most `max_texels`. `None` for an interlaced PNG, whose rows do not
+/// come in order.
+fn png_averaged(
+    name: &str,
+    bytes: &[u8],
+    max_texels: u64,
+) -> Result<Option<(Image, u32)>, ImageError> {
+    let corrupt = |e: png::DecodingError| ImageError::Corrupt(e.to_string());
+    let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
+    decoder.set_transformations(png::Transformations::normalize_to_color8());
+    let mut reader = decoder.read_info().map_err(corrupt)?;
+    if reader.info().interlaced {
+        return Ok(None);
+    }
+    let (width, height) = reader.info().size();
+    let fits =
+        |k: u32| u64::from(width.div_ceil(k)) * u64::from(height.div_ceil(k)) <= max_texels.max(1);
+    let k = (2..=width.max(height).max(2))
+        .find(|&k| fits(k))
+        .unwrap_or(width.max(height));
+    let (ow, oh) = (width.div_ceil(k), height.div_ceil(k));
+    let channels = reader.output_color_type().0.samples();
+    let lut = srgb_lut();
+    let mut sums = vec![[0.0f64; 5]; ow as usize];
+    let mut out = Vec::with_capacity(ow as usize * oh as usize * 4);
+    for y in 0..height {
+        let row = reader
+            .next_row()
+            .map_err(corrupt)?
+            .ok_or_else(|| ImageError::Corrupt(format!("{name}: rows end at {y} of {height}")))?;
+        for (x, px) in row
+            .data()
+            .chunks_exact(channels)
+            .take(width as usize)
+            .enumerate()
+        {
+            let (rgb, a) = match channels {
+                1 => ([px[0]; 3], 255),
+                2 => ([px[0]; 3], px[1]),
+                3 => ([px[0], px[1], px[2]], 255),
+                _ => ([px[0], px[1], px[2]], px[3]),
+            };
+            let s = &mut sums[x / k as usize];
+            for c in 0..3 {
+                s[c] += lut[rgb[c] as usize];
+            }
+            s[3] += f64::from(a) / 255.0;
+            s[4] += 1.0;
+        }
+        if (y + 1) % k == 0 || y + 1 == height {
+            for s in &mut sums {
+                let n = s[4].max(1.0);
+                out.extend((0..3).map(|c| radiant_color::linear_to_srgb8(s[c] / n)));
+                out.push((s[3] / n * 255.0).round().clamp(0.0, 255.0) as u8);
+                *s = [0.0; 5];
+            }
+        }
+    }
+    let image = Image::new(name, ow, oh, out)
+        .ok_or_else(|| ImageError::Corrupt(format!("{ow}×{oh} texels")))?;
+    Ok(Some((image, k)))
+}
+
 fn srgb_lut() -> &'static [f64; 256] {
     static LUT: std::sync::OnceLock<[f64; 256]> = std::sync::OnceLock::new();
     LUT.get_or_init(|| std::array::from_fn(|i| radiant_color::srgb_to_linear(i as f64 / 255.0)))
@@ -636,6 +732,59 @@ pub fn barycentric(v: [DVec3; 3], p: DVec3) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A PNG over the limit is averaged down by the smallest whole factor that fits, each
+    /// texel the mean of its block in linear light, with a warning; a JPEG over it is refused.
+    #[test]
+    fn a_png_over_the_limit_is_averaged_down_row_by_row() {
+        let (w, h) = (64u32, 48u32);
+        let texel = |x: u32, y: u32| [(x * 4) as u8, (y * 5) as u8, ((x + y) % 256) as u8, 200];
+        let rgba: Vec<u8> = (0..h)
+            .flat_map(|y| (0..w).flat_map(move |x| texel(x, y)))
+            .collect();
+        let mut png = std::io::Cursor::new(Vec::new());
+        image::RgbaImage::from_raw(w, h, rgba)
+            .expect("size")
+            .write_to(&mut png, image::ImageFormat::Png)
+            .expect("encodes");
+        // At most 256 texels: 64/4 × 48/4 = 192 (a factor of 3 leaves 352).
+        let (img, warning) =
+            Image::decode_within("big", png.get_ref(), Some("image/png"), 256).expect("decodes");
+        assert_eq!((img.width, img.height), (16, 12));
+        let warning = warning.expect("a warning");
+        assert!(
+            warning.contains("64×48") && warning.contains("4×"),
+            "{warning}"
+        );
+        let lut = srgb_lut();
+        for (ox, oy) in [(0u32, 0u32), (7, 5), (15, 11)] {
+            let got = img.texel(ox, oy);
+            for c in 0..3 {
+                let mean = (0..4)
+                    .flat_map(|dy| (0..4).map(move |dx| (dx, dy)))
+                    .map(|(dx, dy)| lut[texel(ox * 4 + dx, oy * 4 + dy)[c] as usize])
+                    .sum::<f64>()
+                    / 16.0;
+                assert_eq!(
+                    got[c],
+                    radiant_color::linear_to_srgb8(mean),
+                    "({ox}, {oy}) {c}"
+                );
+            }
+            assert_eq!(got[3], 200);
+        }
+        let mut jpeg = std::io::Cursor::new(Vec::new());
+        image::RgbImage::new(w, h)
+            .write_to(&mut jpeg, image::ImageFormat::Jpeg)
+            .expect("encodes");
+        assert!(matches!(
+            Image::decode_within("big", jpeg.get_ref(), None, 256),
+            Err(ImageError::TooLarge {
+                width: 64,
+                height: 48
+            })
+        ));
+    }
 
     fn checker(n: u32) -> Image {
         let mut px = Vec::new();
