@@ -1043,3 +1043,35 @@ fn alpha_masks_let_light_through_where_they_cut() {
     assert!((est[0].mean[0] - open).abs() < 1e-9 * open + 4.0 * est[0].se[0]);
     assert!(est[1].mean[0].abs() < 1e-12);
 }
+
+/// An image URI that names a device (`/dev/zero`, `/dev/urandom`: read without end) is not
+/// read: one warning that says it is not a regular file, and the scene loads with the
+/// material's factor.
+#[test]
+fn an_image_that_is_a_device_is_not_read() {
+    let dir = std::env::temp_dir().join(format!("radiant-device-image-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    for device in ["/dev/zero", "/dev/urandom"] {
+        let mut doc = Doc::default();
+        let m = doc.material(
+            r#"{"name":"textured","pbrMetallicRoughness":{"baseColorFactor":[0.5,0.25,0.125,1],"baseColorTexture":{"index":0}}}"#
+                .into(),
+        );
+        let (p, i) = rect_up(0.0, 1.0, 0.0, 1.0, 0.0);
+        doc.mesh_uv("tile", &p, Some(&uv_of(&p)), &i, m);
+        add_texture(&mut doc, r#""magFilter":9729"#, device);
+        let path = dir.join("device.gltf");
+        std::fs::write(&path, doc.json()).expect("write");
+        let t = std::time::Instant::now();
+        let scene = radiant::scene::load_gltf(&path).expect("a warning, not an error");
+        assert!(t.elapsed().as_secs_f64() < 10.0, "{device} was read");
+        let tile = &scene.surfaces[surface_index(&scene, "tile") as usize];
+        assert!(tile.base_color_texture.is_none() && tile.reflectance == [0.5, 0.25, 0.125]);
+        let warnings = scene.warnings();
+        assert!(
+            warnings.len() == 1 && warnings[0].contains("not a regular file"),
+            "{device}: {warnings:?}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

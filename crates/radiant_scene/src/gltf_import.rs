@@ -252,6 +252,11 @@ fn import_images(
                 (bytes.into(), Some(mime_type))
             }
             gltf::image::Source::Uri { uri, mime_type } => {
+                // A file is read only when it is a regular file of a size an image can have:
+                // a device (`/dev/urandom`) or a FIFO would be read without end.
+                if !uri.starts_with("data:") {
+                    check_image_file(&dir.join(percent_decoded(uri))).map_err(&fail)?;
+                }
                 let data =
                     gltf::buffer::Data::from_source(gltf::buffer::Source::Uri(uri), Some(dir))
                         .map_err(|e| {
@@ -311,6 +316,53 @@ fn import_images(
         }
     }
     Ok((images, slot, warnings))
+}
+
+/// The most bytes an image file may have: a PNG of [`Image::MAX_TEXELS`] RGBA texels stored
+/// uncompressed, four times over (a larger one is refused before it is read).
+const MAX_IMAGE_FILE: u64 = Image::MAX_TEXELS * 4 * 4;
+
+/// Whether `path` may be read as an image: a regular file of at most [`MAX_IMAGE_FILE`] bytes.
+fn check_image_file(path: &Path) -> Result<(), String> {
+    let meta = std::fs::metadata(path).map_err(|e| format!("cannot read it: {e}"))?;
+    if !meta.is_file() {
+        return Err(format!(
+            "{} is not a regular file (a device or a pipe would be read without end)",
+            path.display()
+        ));
+    }
+    if meta.len() > MAX_IMAGE_FILE {
+        return Err(format!(
+            "{} bytes is more than an image file may have ({MAX_IMAGE_FILE})",
+            meta.len()
+        ));
+    }
+    Ok(())
+}
+
+/// A URI's path with its `%XX` escapes decoded (as `gltf` decodes it before reading).
+fn percent_decoded(uri: &str) -> String {
+    let bytes = uri.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        let hex = |b: u8| (b as char).to_digit(16);
+        match (
+            bytes[i],
+            bytes.get(i + 1).copied().and_then(hex),
+            bytes.get(i + 2).copied().and_then(hex),
+        ) {
+            (b'%', Some(h), Some(l)) => {
+                out.push((h * 16 + l) as u8);
+                i += 3;
+            }
+            (b, _, _) => {
+                out.push(b);
+                i += 1;
+            }
+        }
+    }
+    String::from_utf8_lossy(&out).into_owned()
 }
 
 /// Where an image is read: its materials, and the first node and primitive that uses each.
