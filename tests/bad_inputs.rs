@@ -31,6 +31,11 @@ const CASES: &[(&str, Expect)] = &[
         matches!(e, SceneError::Buffer(_))
     }),
     ("short_buffer.gltf", |e| matches!(e, SceneError::Buffer(_))),
+    // `/dev/zero` as a buffer: refused before a byte is read (was read without end).
+    (
+        "buffer_is_a_device.gltf",
+        |e| matches!(e, SceneError::Buffer(what) if what.contains("not a regular file")),
+    ),
     ("bad_percent_uri.gltf", |e| {
         matches!(e, SceneError::Buffer(_))
     }),

@@ -125,6 +125,8 @@ case("glb_length_below_header.glb", valid_glb[:8] + struct.pack("<I", 0) + valid
 # Buffers.
 case("missing_buffer.gltf", mutated(lambda d: d["buffers"][0].update(uri="does_not_exist.bin")))
 case("short_buffer.gltf", mutated(lambda d: d["buffers"][0].update(byteLength=d["buffers"][0]["byteLength"] + 16)))
+# A buffer that names a device: read without end unless refused.
+case("buffer_is_a_device.gltf", mutated(lambda d: d["buffers"][0].update(uri="/dev/zero")))
 # A relative URI whose percent-decoding is not UTF-8.
 case("bad_percent_uri.gltf", mutated(lambda d: d["buffers"][0].update(uri="%FF%FE.bin")))
 

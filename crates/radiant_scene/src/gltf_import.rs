@@ -59,6 +59,9 @@ fn load(bytes: &[u8], base: Option<&Path>) -> Result<Scene, SceneError> {
     check_attribute_indices(&json)?;
     let document = gltf::Document::from_json(json).map_err(parse_error)?;
     check_uris(&document)?;
+    if let Some(dir) = base {
+        check_buffer_files(&document, dir)?;
+    }
     let buffers = gltf::import_buffers(&document, base, blob).map_err(|e| match e {
         gltf::Error::ExternalReferenceInSliceImport => {
             SceneError::Buffer("external buffer reference, but no directory to resolve it".into())
@@ -254,8 +257,10 @@ fn import_images(
             gltf::image::Source::Uri { uri, mime_type } => {
                 // A file is read only when it is a regular file of a size an image can have:
                 // a device (`/dev/urandom`) or a FIFO would be read without end.
-                if !uri.starts_with("data:") {
-                    check_image_file(&dir.join(percent_decoded(uri))).map_err(&fail)?;
+                if !uri.starts_with("data:")
+                    && let Some(path) = file_of(dir, uri)
+                {
+                    check_image_file(&path).map_err(&fail)?;
                 }
                 let data =
                     gltf::buffer::Data::from_source(gltf::buffer::Source::Uri(uri), Some(dir))
@@ -340,29 +345,66 @@ fn check_image_file(path: &Path) -> Result<(), String> {
     Ok(())
 }
 
-/// A URI's path with its `%XX` escapes decoded (as `gltf` decodes it before reading).
-fn percent_decoded(uri: &str) -> String {
-    let bytes = uri.as_bytes();
-    let mut out = Vec::with_capacity(bytes.len());
+/// A relative URI's path with its `%XX` escapes decoded, as `gltf` decodes it before reading;
+/// `None` where that is not UTF-8.
+fn percent_decode(uri: &str) -> Option<String> {
+    let b = uri.as_bytes();
+    let hex = |k: usize| b.get(k).and_then(|&c| char::from(c).to_digit(16));
+    let mut out = Vec::with_capacity(b.len());
     let mut i = 0;
-    while i < bytes.len() {
-        let hex = |b: u8| (b as char).to_digit(16);
-        match (
-            bytes[i],
-            bytes.get(i + 1).copied().and_then(hex),
-            bytes.get(i + 2).copied().and_then(hex),
-        ) {
-            (b'%', Some(h), Some(l)) => {
-                out.push((h * 16 + l) as u8);
-                i += 3;
-            }
-            (b, _, _) => {
-                out.push(b);
-                i += 1;
-            }
+    while i < b.len() {
+        if let (b'%', Some(hi), Some(lo)) = (b[i], hex(i + 1), hex(i + 2)) {
+            out.push((hi * 16 + lo) as u8); // both digits are below 16
+            i += 3;
+        } else {
+            out.push(b[i]);
+            i += 1;
         }
     }
-    String::from_utf8_lossy(&out).into_owned()
+    String::from_utf8(out).ok()
+}
+
+/// The file a buffer or image URI names, resolved against `dir` as `gltf` resolves it (`None`
+/// for a data URI, another scheme, or a path that does not decode).
+fn file_of(dir: &Path, uri: &str) -> Option<std::path::PathBuf> {
+    if uri.contains(':') {
+        return uri.strip_prefix("file://").map(std::path::PathBuf::from);
+    }
+    percent_decode(uri).map(|p| dir.join(p))
+}
+
+/// Refuses buffer files that would be read without end or far past their `byteLength`: a
+/// device or a pipe (`/dev/zero`), or a file over its declared length by more than 1 MiB.
+fn check_buffer_files(doc: &gltf::Document, dir: &Path) -> Result<(), SceneError> {
+    for buffer in doc.buffers() {
+        let gltf::buffer::Source::Uri(uri) = buffer.source() else {
+            continue;
+        };
+        let Some(path) = file_of(dir, uri) else {
+            continue;
+        };
+        // A file that cannot be read is the importer's own error, which names it.
+        let Ok(meta) = std::fs::metadata(&path) else {
+            continue;
+        };
+        let declared = buffer.length() as u64;
+        if !meta.is_file() {
+            return Err(SceneError::Buffer(format!(
+                "buffer {}: {} is not a regular file (a device or a pipe would be read without end)",
+                buffer.index(),
+                path.display()
+            )));
+        }
+        if meta.len() > declared.saturating_add(1 << 20) {
+            return Err(SceneError::Buffer(format!(
+                "buffer {}: {} holds {} bytes where the buffer declares {declared}",
+                buffer.index(),
+                path.display(),
+                meta.len()
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// Where an image is read: its materials, and the first node and primitive that uses each.
@@ -431,25 +473,8 @@ fn check_attribute_indices(json: &gltf::json::Root) -> Result<(), SceneError> {
 /// The `gltf` crate unwraps the percent-decoding of relative URIs, which panics when the
 /// decoded bytes are not UTF-8.
 fn check_uris(doc: &gltf::Document) -> Result<(), SceneError> {
-    fn decodes(uri: &str) -> bool {
-        if uri.contains(':') {
-            return true; // data: and file: URIs are not percent-decoded
-        }
-        let b = uri.as_bytes();
-        let hex = |k: usize| b.get(k).and_then(|&c| char::from(c).to_digit(16));
-        let mut out = Vec::with_capacity(b.len());
-        let mut i = 0;
-        while i < b.len() {
-            if let (b'%', Some(hi), Some(lo)) = (b[i], hex(i + 1), hex(i + 2)) {
-                out.push((hi * 16 + lo) as u8); // both digits are below 16
-                i += 3;
-            } else {
-                out.push(b[i]);
-                i += 1;
-            }
-        }
-        std::str::from_utf8(&out).is_ok()
-    }
+    // data: and file: URIs are not percent-decoded.
+    let decodes = |uri: &str| uri.contains(':') || percent_decode(uri).is_some();
     for buffer in doc.buffers() {
         if let gltf::buffer::Source::Uri(uri) = buffer.source()
             && !decodes(uri)
