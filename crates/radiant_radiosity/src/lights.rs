@@ -46,6 +46,28 @@ fn light_one(
 ) {
     let node = mesh.leaf_node(leaf as u32);
     let x = node.centroid;
+    let Some((irr, target)) = unshadowed(frame, light, local, x, node.normal) else {
+        return;
+    };
+    if !vis.segment_clear(x.as_vec3(), target.as_vec3()) {
+        return;
+    }
+    for c in 0..3 {
+        e[c] += irr * light.color[c];
+    }
+}
+
+/// `light`'s irradiance at `x` (unit normal `n`; both in the mesh's `frame`, the light at
+/// `local` there) before shadows, and the point a shadow ray from `x` runs to; `None` where
+/// it gives none. What the elements' direct light and the light map's per texel share.
+#[inline]
+pub(crate) fn unshadowed(
+    frame: crate::mesh::Frame,
+    light: &Light,
+    local: glam::DVec3,
+    x: glam::DVec3,
+    n: glam::DVec3,
+) -> Option<(f64, glam::DVec3)> {
     let (to_light, dist_world, target) = match light.kind {
         LightKind::Directional => {
             let d = -light.direction;
@@ -55,19 +77,11 @@ fn light_one(
             let d = local - x;
             let len = d.length();
             if len <= 0.0 {
-                return;
+                return None;
             }
             (d / len, len * frame.scale, local)
         }
     };
-    let irr = light.irradiance(to_light, node.normal.dot(to_light), dist_world);
-    if irr <= 0.0 {
-        return;
-    }
-    if !vis.segment_clear(x.as_vec3(), target.as_vec3()) {
-        return;
-    }
-    for c in 0..3 {
-        e[c] += irr * light.color[c];
-    }
+    let irr = light.irradiance(to_light, n.dot(to_light), dist_world);
+    (irr > 0.0).then_some((irr, target))
 }

@@ -28,7 +28,7 @@ use glam::{DVec2, DVec3};
 use std::borrow::Cow;
 
 use radiant_scene::atlas::{Atlas, TexelOwner, texel_position};
-use radiant_scene::{Light, LightKind, Scene};
+use radiant_scene::{Light, Scene};
 use radiant_visibility::Visibility;
 use rayon::prelude::*;
 
@@ -215,7 +215,7 @@ impl<V: Visibility> TexelLights<V> {
         for (light, local) in &self.lights {
             let one = |&w: &(f64, f64)| -> (f64, bool) {
                 let x = point(w);
-                match self.unshadowed(light, *local, x, *n) {
+                match crate::lights::unshadowed(self.frame, light, *local, x, *n) {
                     Some((irr, target)) => {
                         (irr, self.vis.segment_clear(x.as_vec3(), target.as_vec3()))
                     }
@@ -237,27 +237,6 @@ impl<V: Visibility> TexelLights<V> {
             }
         }
         TexelSample { at, direct }
-    }
-
-    /// The light's irradiance at `x` (normal `n`) before shadows, and the point a shadow ray
-    /// runs to; `None` where it gives none. As [`crate::lights`] evaluates it at centroids.
-    fn unshadowed(&self, light: &Light, local: DVec3, x: DVec3, n: DVec3) -> Option<(f64, DVec3)> {
-        let (to_light, dist_world, target) = match light.kind {
-            LightKind::Directional => {
-                let d = -light.direction;
-                (d, 1.0, x + d * 4.0)
-            }
-            _ => {
-                let d = local - x;
-                let len = d.length();
-                if len <= 0.0 {
-                    return None;
-                }
-                (d / len, len * self.frame.scale, local)
-            }
-        };
-        let irr = light.irradiance(to_light, n.dot(to_light), dist_world);
-        (irr > 0.0).then_some((irr, target))
     }
 }
 
