@@ -60,9 +60,10 @@ const CASES: &[(&str, Expect)] = &[
     ("float_indices.gltf", |e| {
         matches!(e, SceneError::Invalid(_))
     }),
-    ("sparse_accessor.gltf", |e| {
-        matches!(e, SceneError::Unsupported(_))
-    }),
+    (
+        "sparse_index_out_of_range.gltf",
+        |e| matches!(e, SceneError::Invalid(what) if what.contains("sparse accessor 0")),
+    ),
     ("image_view_out_of_bounds.gltf", |e| {
         matches!(e, SceneError::Invalid(_))
     }),
@@ -117,7 +118,27 @@ const VALID: &[&str] = &[
     "degenerate_only.gltf",
     "texture_missing_file.gltf",
     "texture_undecodable.gltf",
+    "sparse_accessor.gltf",
+    "ok_sparse_positions.gltf",
 ];
+
+/// Sparse accessors are core glTF 2.0: read, with the substituted values where they belong.
+#[test]
+fn a_sparse_accessor_is_read_right() {
+    let scene = load_gltf(&dir().join("ok_sparse_positions.gltf")).expect("loads");
+    let vertices: Vec<[f64; 3]> = scene
+        .triangles
+        .iter()
+        .flat_map(|t| t.vertices.map(|v| v.to_array()))
+        .collect();
+    // The quad's vertex 2, (1, 1, 0), moved to (1, 2, 0); the others as they were.
+    assert!(vertices.contains(&[1.0, 2.0, 0.0]), "{vertices:?}");
+    assert!(!vertices.contains(&[1.0, 1.0, 0.0]), "{vertices:?}");
+    assert!(vertices.contains(&[0.0, 1.0, 0.0]) && vertices.contains(&[1.0, 0.0, 0.0]));
+    // The corpus's first sparse file substitutes vertex 0 by itself: the plain quad.
+    let same = load_gltf(&dir().join("sparse_accessor.gltf")).expect("loads");
+    assert_eq!(same.triangles.len(), 2);
+}
 
 /// Texture faults load with one warning each, naming the image, what is wrong and the material
 /// and node that read it; the material keeps its colour factor.

@@ -125,6 +125,24 @@ case("glb_length_below_header.glb", valid_glb[:8] + struct.pack("<I", 0) + valid
 # Buffers.
 case("missing_buffer.gltf", mutated(lambda d: d["buffers"][0].update(uri="does_not_exist.bin")))
 case("short_buffer.gltf", mutated(lambda d: d["buffers"][0].update(byteLength=d["buffers"][0]["byteLength"] + 16)))
+# Sparse accessors (core glTF 2.0): one that moves vertex 2 to (1, 2, 0), read right, and one
+# whose index names a vertex the accessor does not have.
+def sparse(index, value):
+    def apply(d):
+        blob = bytearray(base64.b64decode(d["buffers"][0]["uri"].split(",", 1)[1]))
+        at = len(blob)
+        blob += struct.pack("<H", index) + b"\0\0" + struct.pack("<3f", *value)
+        d["buffers"][0] = {"byteLength": len(blob), "uri": data_uri(bytes(blob))}
+        d["bufferViews"] += [{"buffer": 0, "byteOffset": at, "byteLength": 2},
+                             {"buffer": 0, "byteOffset": at + 4, "byteLength": 12}]
+        d["accessors"][0]["sparse"] = {"count": 1, "indices": {"bufferView": 2, "componentType": 5123},
+                                       "values": {"bufferView": 3}}
+        d["accessors"][0]["max"] = [1.0, 2.0, 0.0]
+    return apply
+
+
+case("ok_sparse_positions.gltf", mutated(sparse(2, (1.0, 2.0, 0.0))))
+case("sparse_index_out_of_range.gltf", mutated(sparse(9, (1.0, 2.0, 0.0))))
 # A buffer that names a device: read without end unless refused.
 case("buffer_is_a_device.gltf", mutated(lambda d: d["buffers"][0].update(uri="/dev/zero")))
 # A relative URI whose percent-decoding is not UTF-8.
@@ -141,6 +159,7 @@ case("stride_too_small.gltf", mutated(lambda d: d["bufferViews"][0].update(byteS
 case("position_not_vec3_float.gltf", mutated(lambda d: d["accessors"][0].update(componentType=5123)))
 # Indices must be unsigned integers; these are FLOAT (3 of them fit the 12-byte view).
 case("float_indices.gltf", mutated(lambda d: d["accessors"][1].update(componentType=5126, count=3)))
+# A sparse accessor whose one substitution puts vertex 0 back where it was: loads as the quad.
 case("sparse_accessor.gltf", mutated(lambda d: d["accessors"][0].update(sparse={
     "count": 1,
     "indices": {"bufferView": 1, "componentType": 5123},

@@ -345,6 +345,62 @@ fn check_image_file(path: &Path) -> Result<(), String> {
     Ok(())
 }
 
+/// A sparse accessor's substitution (core glTF 2.0, which `gltf`'s reader applies): its count
+/// within the accessor's, its index and value arrays inside their views and buffers, and every
+/// index naming an element of the accessor, increasing as the specification asks.
+fn check_sparse(
+    acc: &gltf::Accessor,
+    sparse: &gltf::accessor::sparse::Sparse,
+    buffers: &[gltf::buffer::Data],
+) -> Result<(), SceneError> {
+    use gltf::accessor::sparse::IndexType;
+    let invalid =
+        |what: String| SceneError::Invalid(format!("sparse accessor {}: {what}", acc.index()));
+    let count = sparse.count();
+    if count == 0 || count > acc.count() {
+        return Err(invalid(format!(
+            "{count} substitutions for {} elements",
+            acc.count()
+        )));
+    }
+    // The bytes of `len` bytes at `offset` of `view`, checked against the view and its buffer.
+    let slice = |view: gltf::buffer::View, offset: usize, len: usize, what: &str| {
+        let end = offset.checked_add(len).filter(|&e| e <= view.length());
+        let buf = buffers.get(view.buffer().index());
+        match (end, buf) {
+            (Some(end), Some(buf)) => buf
+                .get(view.offset() + offset..view.offset() + end)
+                .ok_or_else(|| invalid(format!("its {what} lie outside their buffer"))),
+            _ => Err(invalid(format!("its {what} lie outside their view"))),
+        }
+    };
+    let indices = sparse.indices();
+    let size = match indices.index_type() {
+        IndexType::U8 => 1,
+        IndexType::U16 => 2,
+        IndexType::U32 => 4,
+    };
+    let bytes = slice(indices.view(), indices.offset(), count * size, "indices")?;
+    let values = sparse.values();
+    slice(values.view(), values.offset(), count * acc.size(), "values")?;
+    let mut last: Option<u64> = None;
+    for k in bytes.chunks_exact(size) {
+        let i = match size {
+            1 => u64::from(k[0]),
+            2 => u64::from(u16::from_le_bytes([k[0], k[1]])),
+            _ => u64::from(u32::from_le_bytes([k[0], k[1], k[2], k[3]])),
+        };
+        if i >= acc.count() as u64 || last.is_some_and(|l| i <= l) {
+            return Err(invalid(format!(
+                "index {i} is not an increasing index below its count {}",
+                acc.count()
+            )));
+        }
+        last = Some(i);
+    }
+    Ok(())
+}
+
 /// A relative URI's path with its `%XX` escapes decoded, as `gltf` decodes it before reading;
 /// `None` where that is not UTF-8.
 fn percent_decode(uri: &str) -> Option<String> {
@@ -506,11 +562,8 @@ fn check_accessors(doc: &gltf::Document, buffers: &[gltf::buffer::Data]) -> Resu
         let bad = || SceneError::AccessorOutOfBounds {
             accessor: acc.index(),
         };
-        if acc.sparse().is_some() {
-            return Err(SceneError::Unsupported(format!(
-                "sparse accessor {}",
-                acc.index()
-            )));
+        if let Some(sparse) = acc.sparse() {
+            check_sparse(&acc, &sparse, buffers)?;
         }
         if acc.count() == 0 {
             return Err(SceneError::Invalid(format!(
