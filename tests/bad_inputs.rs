@@ -31,6 +31,15 @@ const CASES: &[(&str, Expect)] = &[
         matches!(e, SceneError::Buffer(_))
     }),
     ("short_buffer.gltf", |e| matches!(e, SceneError::Buffer(_))),
+    // Compressed geometry marked required: refused, naming the extension.
+    (
+        "draco_required.gltf",
+        |e| matches!(e, SceneError::Invalid(what) if what.contains("KHR_draco_mesh_compression")),
+    ),
+    (
+        "meshopt_required.gltf",
+        |e| matches!(e, SceneError::Invalid(what) if what.contains("EXT_meshopt_compression")),
+    ),
     // `/dev/zero` as a buffer: refused before a byte is read (was read without end).
     (
         "buffer_is_a_device.gltf",

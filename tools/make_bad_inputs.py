@@ -143,6 +143,16 @@ def sparse(index, value):
 
 case("ok_sparse_positions.gltf", mutated(sparse(2, (1.0, 2.0, 0.0))))
 case("sparse_index_out_of_range.gltf", mutated(sparse(9, (1.0, 2.0, 0.0))))
+# Compressed geometry marked required (Draco, meshopt), which Radiant does not decode.
+def required(ext):
+    def apply(d):
+        d["extensionsUsed"] = [ext]
+        d["extensionsRequired"] = [ext]
+    return apply
+
+
+case("draco_required.gltf", mutated(required("KHR_draco_mesh_compression")))
+case("meshopt_required.gltf", mutated(required("EXT_meshopt_compression")))
 # A buffer that names a device: read without end unless refused.
 case("buffer_is_a_device.gltf", mutated(lambda d: d["buffers"][0].update(uri="/dev/zero")))
 # A relative URI whose percent-decoding is not UTF-8.
