@@ -112,67 +112,21 @@ fn parse_image_size(s: &str) -> anyhow::Result<(u32, u32)> {
     Ok((parse(w)?, parse(h)?))
 }
 
-/// Reads a points CSV in scene units (`x,y,z`) or the Mitsuba layout in millimetres.
+/// Reads a points CSV in scene units (`x,y,z`) or the Mitsuba layout in millimetres, as
+/// `radiant bake --points` reads it (`metrics::parse_point_positions`).
 fn read_points(path: &Path) -> anyhow::Result<Vec<Point>> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let mut lines = text
-        .lines()
-        .map(str::trim)
-        .filter(|l| !l.is_empty() && !l.starts_with('#'));
-    let header: Vec<&str> = lines
-        .next()
-        .ok_or_else(|| anyhow::anyhow!("{}: empty", path.display()))?
-        .split(',')
-        .map(str::trim)
-        .collect();
-    let col = |n: &str| header.iter().position(|h| *h == n);
-    let (xyz, scale) = match (col("x"), col("x_mm")) {
-        (Some(x), _) => ([Some(x), col("y"), col("z")], 1.0),
-        (None, Some(x)) => ([Some(x), col("y_mm"), col("z_mm")], 1e-3),
-        _ => anyhow::bail!(
-            "{}: the header needs x,y,z (scene units) or x_mm,y_mm,z_mm",
-            path.display()
-        ),
-    };
-    let cols: Vec<usize> = [xyz[0], xyz[1], xyz[2], col("nx"), col("ny"), col("nz")]
+    let specs = radiant::radiosity::metrics::parse_point_positions(&text, 1e-3)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    Ok(specs
         .into_iter()
-        .collect::<Option<_>>()
-        .ok_or_else(|| anyhow::anyhow!("{}: the header needs nx,ny,nz", path.display()))?;
-    let mut out = Vec::new();
-    for (k, line) in lines.enumerate() {
-        let f: Vec<&str> = line.split(',').map(str::trim).collect();
-        let v: Vec<f64> = cols
-            .iter()
-            .map(|&c| {
-                f.get(c)
-                    .and_then(|s| s.parse::<f64>().ok())
-                    .filter(|x| x.is_finite())
-                    .ok_or_else(|| {
-                        anyhow::anyhow!(
-                            "{}: row {}: bad number in column {}",
-                            path.display(),
-                            k + 2,
-                            c + 1
-                        )
-                    })
-            })
-            .collect::<anyhow::Result<_>>()?;
-        let normal = glam::DVec3::new(v[3], v[4], v[5]);
-        anyhow::ensure!(
-            normal.length() > 0.0,
-            "{}: row {}: zero normal",
-            path.display(),
-            k + 2
-        );
-        out.push(Point {
-            name: f.first().copied().unwrap_or_default().to_string(),
-            position: glam::DVec3::new(v[0], v[1], v[2]) * scale,
-            normal: normal.normalize(),
-        });
-    }
-    anyhow::ensure!(!out.is_empty(), "{}: no points", path.display());
-    Ok(out)
+        .map(|p| Point {
+            name: p.name,
+            position: p.position,
+            normal: p.normal,
+        })
+        .collect())
 }
 
 /// A progress callback that drives a bar (with ETA) and logs every few seconds.

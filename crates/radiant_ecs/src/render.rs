@@ -311,11 +311,9 @@ pub fn fill_lightmap_from_field(
         let rho = field.reflectance(leaf);
         let textured = surface.base_color_texture.is_some();
         [0, 1, 2].map(|c| {
-            let scale = if textured {
-                1.0
-            } else {
-                let stored = (surface.reflectance[c] * 255.0).round() / 255.0;
-                if stored > 0.0 { rho[c] / stored } else { 0.0 }
+            let scale = match textured {
+                true => 1.0,
+                false => over_stored(rho[c], surface.reflectance[c]),
             };
             (h[c] * scale).clamp(0.0, 65504.0) as f32
         })
@@ -344,13 +342,9 @@ pub fn set_lightmap(
         .surfaces
         .iter()
         .map(|s| {
-            std::array::from_fn(|c| {
-                let stored = (s.reflectance[c] * 255.0).round() / 255.0;
-                match (s.base_color_texture, stored > 0.0) {
-                    (Some(_), _) => 1.0,
-                    (None, true) => s.reflectance[c] / stored,
-                    (None, false) => 0.0,
-                }
+            std::array::from_fn(|c| match s.base_color_texture {
+                Some(_) => 1.0,
+                None => over_stored(s.reflectance[c], s.reflectance[c]),
             })
         })
         .collect();
@@ -367,6 +361,13 @@ pub fn set_lightmap(
                 std::array::from_fn(|c| (f64::from(h[c]) * s[c]).clamp(0.0, 65504.0) as f32);
         }
     }
+}
+
+/// `rho` over the albedo the 8-bit G-buffer stores for a base colour `factor` (0 where that
+/// is 0): what an untextured surface's `H` is scaled by so the frame gives `rho × H`.
+fn over_stored(rho: f64, factor: f64) -> f64 {
+    let stored = (factor * 255.0).round() / 255.0;
+    if stored > 0.0 { rho / stored } else { 0.0 }
 }
 
 /// Drops the punctual lights from a scene lit by a bake's light map: their direct light (with
