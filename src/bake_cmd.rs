@@ -159,6 +159,11 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         None => serde_json::Value::Null,
     };
     let written = write_outputs(args, &job, &result)?;
+    // Only where it is measured: on Sponza it takes 7 s.
+    let shown = match job.reference {
+        Some(_) => Some(shown_surfaces(args, &job, &result, &written.map)?),
+        None => None,
+    };
     let asked = match &job.points {
         Some(p) => Some(crate::points::write(
             p,
@@ -171,6 +176,10 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     };
     let total_s = job.start.elapsed().as_secs_f64();
     let mut report = report_json(args, &job, &result, &written, error.as_ref(), total_s);
+    if let Some(shown) = &shown {
+        report["parameters"]["lightmap"]["surfaces_seconds"] = json!(shown.seconds);
+        report["reference"]["lightmap_error"] = output::error_json(&shown.error);
+    }
     if let Some(p) = &asked {
         report["points"] = p.json().clone();
     }
@@ -193,6 +202,14 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         points.as_ref(),
         error.as_ref(),
     );
+    if let (Some((name, _)), Some(ShownSurfaces { error: e, .. })) = (&error, &shown) {
+        println!(
+            "the light map against {name}: mean {:.2} %, max {:.2} %, rms {:.2} % (its means over the same surfaces, in lightmap_surfaces.csv)",
+            e.mean_rel * 100.0,
+            e.max_rel * 100.0,
+            e.rel_rms * 100.0
+        );
+    }
     if let Some(p) = &asked {
         println!("wrote {}/points.csv", args.out.display());
         if let Some(line) = p.summary() {
@@ -391,6 +408,43 @@ fn write_outputs(args: &BakeArgs, job: &Job, result: &BakeResult) -> anyhow::Res
         lightmap_s,
         write_s,
         export,
+    })
+}
+
+/// The light map's means over the surfaces and their error against the reference.
+struct ShownSurfaces {
+    seconds: f64,
+    error: ErrorStats,
+}
+
+/// Writes `lightmap_surfaces.csv`: the mean over each surface of what the renderer shows (the
+/// light map times the albedo, plus emission), the columns of `surfaces.csv`, so that the
+/// solution, its light map and a path tracer compare surface by surface
+/// (`tools/light_loss.py`), and measures it against the reference as the solution is measured.
+fn shown_surfaces(
+    args: &BakeArgs,
+    job: &Job,
+    result: &BakeResult,
+    map: &lightmap::LightMap,
+) -> anyhow::Result<ShownSurfaces> {
+    let lap = Instant::now();
+    let means = radiant::radiosity::texel_light::shown_surface_means(
+        &job.scene,
+        &job.atlas,
+        &result.mesh,
+        map,
+    )?;
+    let Some((_, rows)) = &job.reference else {
+        anyhow::bail!("the light map's surface means are measured against a reference");
+    };
+    let error = metrics::compare_surfaces(&means, rows)?;
+    write_atomic(
+        &args.out.join("lightmap_surfaces.csv"),
+        output::surfaces_csv(&means).as_bytes(),
+    )?;
+    Ok(ShownSurfaces {
+        seconds: lap.elapsed().as_secs_f64(),
+        error,
     })
 }
 

@@ -112,6 +112,18 @@ fn bake_writes_every_output() {
             .expect("error")
             < 0.05
     );
+    // With a reference, the light map is measured over the same surfaces too.
+    assert!(stdout.contains("the light map against"), "{stdout}");
+    let shown = std::fs::read_to_string(out.join("lightmap_surfaces.csv")).expect("light map");
+    let mut lines = shown.lines();
+    assert_eq!(lines.next(), Some("surface,area,b_r,b_g,b_b"));
+    assert_eq!(lines.count(), 19);
+    assert!(
+        report["reference"]["lightmap_error"]["mean_rel_error"]
+            .as_f64()
+            .expect("the light map's error")
+            < 0.05
+    );
     // No temporary files are left behind.
     let leftovers: Vec<_> = std::fs::read_dir(&out)
         .expect("dir")

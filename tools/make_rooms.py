@@ -24,6 +24,10 @@ The table's smallest rooms (about 1 k triangles) are under the 4 096 triangles f
 `radiant bake` takes the clustered hierarchy by itself: add `--hierarchy clustered` to bake
 them as the larger ones are.
 
+With --faces the same geometry is written with the room's and the boxes' faces as surfaces of
+their own (floor, ceiling, walls; box_tops, box_sides, box_bottoms), so that `surfaces.csv`,
+`lightmap_surfaces.csv` and `radiant reference` tell them apart (`tools/light_loss.py`).
+
 Standard library only. Positions are float32 in one .bin beside the .gltf.
 """
 import argparse
@@ -38,16 +42,21 @@ GROW_CELL = W / 8
 TABLE = [(5, 1), (8, 2), (23, 2), (72, 2)]
 
 
+# The faces of box(), in its order: x low, x high, y low (bottom), y high (top), z low, z high.
+FACE_KINDS = ["side", "side", "bottom", "top", "side", "side"]
+
+
 def box(lo, hi, inward):
-    """The 12 triangles of an axis-aligned box, counter-clockwise seen from outside (or inside)."""
+    """The 12 triangles of an axis-aligned box, counter-clockwise seen from outside (or inside),
+    each with its face's kind (FACE_KINDS)."""
     def c(i):
         return (hi[0] if i & 1 else lo[0], hi[1] if i & 2 else lo[1], hi[2] if i & 4 else lo[2])
     faces = [[0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 5, 4], [2, 6, 7, 3], [0, 2, 3, 1], [4, 5, 7, 6]]
     out = []
-    for f in faces:
+    for kind, f in zip(FACE_KINDS, faces):
         q = [c(i) for i in f]
         for t in ([q[0], q[1], q[2]], [q[0], q[2], q[3]]):
-            out.append([t[0], t[2], t[1]] if inward else t)
+            out.append((kind, [t[0], t[2], t[1]] if inward else t))
     return out
 
 
@@ -63,10 +72,18 @@ def split(tris, levels):
     return tris
 
 
-def room(k, levels, grow=False):
+ROOM_FACES = {"bottom": "floor", "top": "ceiling", "side": "walls"}
+
+
+def room(k, levels, grow=False, faces=False):
+    """The room's parts: name -> triangles; with faces, a part per kind of face."""
     width = GROW_CELL * max(k, 1) if grow else W
     panels = max(1, (k + 4) // 8) if grow else 1
-    parts = {"room": box((0, 0, 0), (width, H, width), True)}
+    walls = box((0, 0, 0), (width, H, width), True)
+    if faces:
+        parts = {name: [t for kind, t in walls if kind == face] for face, name in ROOM_FACES.items()}
+    else:
+        parts = {"room": [t for _, t in walls]}
     tile, y = width / panels, H - 1e-3
     parts["light"] = []
     for a in range(panels):
@@ -83,8 +100,19 @@ def room(k, levels, grow=False):
             lo = ((i + 0.25) * cell, 0.0, (j + 0.25) * cell)
             size = (cell * 0.5, min(cell * 0.5, H * 0.5), cell * 0.5)
             boxes += box(lo, tuple(a + b for a, b in zip(lo, size)), False)
-    parts["boxes"] = split(boxes, levels)
+    if faces:
+        for kind in ("top", "side", "bottom"):
+            parts[f"box_{kind}s"] = split([t for f, t in boxes if f == kind], levels)
+    else:
+        parts["boxes"] = split([t for _, t in boxes], levels)
     return parts
+
+
+def material_of(part):
+    """The material key of a part: the room's faces are the room's, the boxes' the boxes'."""
+    if part in ROOM_FACES.values():
+        return "room"
+    return "boxes" if part.startswith("box") else part
 
 
 def write(parts, path):
@@ -112,7 +140,7 @@ def write(parts, path):
         doc["bufferViews"].append({"buffer": 0, "byteOffset": start, "byteLength": len(blob) - start})
         doc["accessors"].append({"bufferView": n, "componentType": 5126, "count": 3 * len(tris),
                                  "type": "VEC3", "min": lo, "max": hi})
-        doc["materials"].append(materials[name])
+        doc["materials"].append(materials[material_of(name)])
         doc["meshes"].append({"name": name, "primitives": [{"attributes": {"POSITION": n}, "material": n}]})
         doc["nodes"].append({"name": name, "mesh": n})
         doc["scenes"][0]["nodes"].append(n)
@@ -129,6 +157,8 @@ def main():
     ap.add_argument("split", nargs="?", type=int, help="levels of 4-way splitting of each box face")
     ap.add_argument("out", nargs="?", help="output .gltf")
     ap.add_argument("--table", metavar="DIR", help="write the table's rooms into DIR")
+    ap.add_argument("--faces", action="store_true",
+                    help="the room's and the boxes' faces as surfaces of their own")
     ap.add_argument("--grow", action="store_true",
                     help="rooms grow with their boxes (2.5 m cells, a panel per 20 m tile)")
     a = ap.parse_args()
@@ -143,7 +173,7 @@ def main():
     for k, s, out in jobs:
         if k < 0 or s < 0 or s > 6:
             sys.exit(f"k {k} and split {s}: k >= 0, 0 <= split <= 6")
-        n = write(room(k, s, a.grow), out)
+        n = write(room(k, s, a.grow, a.faces), out)
         print(f"{out}: {n} triangles")
 
 

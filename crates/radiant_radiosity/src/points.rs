@@ -17,7 +17,7 @@ use radiant_scene::{Scene, Triangle};
 use rayon::prelude::*;
 
 use crate::lightmap::{LightMap, static_roots};
-use crate::metrics::PointSpec;
+use crate::metrics::{PointSpec, SurfaceMean};
 use crate::system::Rgb;
 
 /// How far above a point (along its normal) the locating ray starts, and half the distance it
@@ -195,11 +195,25 @@ pub fn shown_at(
             scene: scene.triangles.len(),
         });
     }
-    // The texture means the albedo is modulated by (the surface's reflectance is its factor
-    // times that mean, as the reference path tracer reads it).
+    let means = texture_means(scene, located.iter().map(|&(i, _)| i));
+    Ok(located
+        .iter()
+        .map(|&(i, x)| shown(scene, atlas, map, &means, i, x))
+        .collect())
+}
+
+/// The means of the textures of the surfaces of `triangles`, by image: the albedo is
+/// modulated by the texel over its image's mean (the surface's reflectance is its factor times
+/// that mean, as the reference path tracer reads it).
+fn texture_means(scene: &Scene, triangles: impl Iterator<Item = u32>) -> HashMap<u32, [f64; 4]> {
     let mut means: HashMap<u32, [f64; 4]> = HashMap::new();
-    for &(i, _) in located {
-        let s = &scene.surfaces[scene.triangles[i as usize].surface as usize];
+    for i in triangles {
+        let Some(t) = scene.triangles.get(i as usize) else {
+            continue;
+        };
+        let Some(s) = scene.surfaces.get(t.surface as usize) else {
+            continue;
+        };
         for t in [s.base_color_texture, s.emissive_texture]
             .into_iter()
             .flatten()
@@ -209,53 +223,163 @@ pub fn shown_at(
             }
         }
     }
-    Ok(located
-        .iter()
-        .map(|&(i, x)| {
-            let t = &scene.triangles[i as usize];
-            let s = &scene.surfaces[t.surface as usize];
-            let b = barycentric(t.vertices, x);
-            let uv = atlas.uv[i as usize];
-            let at = |k: usize| {
-                f64::from(uv[0][k]) * b[0] + f64::from(uv[1][k]) * b[1] + f64::from(uv[2][k]) * b[2]
-            };
-            let page = atlas.page.get(i as usize).copied().unwrap_or(0);
-            let h = map.sample(page, [at(0), at(1)]);
-            let raw: [Vec2; 2] = std::array::from_fn(|set| {
-                let u = t.uv[set];
-                (u[0].as_dvec2() * b[0] + u[1].as_dvec2() * b[1] + u[2].as_dvec2() * b[2]).as_vec2()
-            });
-            let modulation = |texture: Option<TextureRef>| -> [f64; 3] {
-                let Some(tex) = texture else {
-                    return [1.0; 3];
-                };
-                let Some(mean) = means.get(&tex.image) else {
-                    return [1.0; 3];
-                };
-                let texel = tex.sample_linear(&scene.images, tex.uv(raw));
-                std::array::from_fn(|c| {
-                    if mean[c] > 0.0 {
-                        f64::from(texel[c]) / mean[c]
-                    } else {
-                        1.0
-                    }
-                })
-            };
-            let (kr, ke) = (
-                modulation(s.base_color_texture),
-                modulation(s.emissive_texture),
-            );
-            let l = std::array::from_fn(|c| {
-                (s.reflectance[c] * kr[c]).clamp(0.0, 1.0) * h[c] + s.emission[c] * ke[c]
-            });
-            ShownPoint {
-                triangle: i,
-                position: x,
-                h,
-                l,
+    means
+}
+
+/// What the renderer shows at `x` on triangle `i` (on the atlas: checked by the caller).
+fn shown(
+    scene: &Scene,
+    atlas: &Atlas,
+    map: &LightMap,
+    means: &HashMap<u32, [f64; 4]>,
+    i: u32,
+    x: DVec3,
+) -> ShownPoint {
+    let t = &scene.triangles[i as usize];
+    let s = &scene.surfaces[t.surface as usize];
+    let b = barycentric(t.vertices, x);
+    let uv = atlas.uv[i as usize];
+    let at = |k: usize| {
+        f64::from(uv[0][k]) * b[0] + f64::from(uv[1][k]) * b[1] + f64::from(uv[2][k]) * b[2]
+    };
+    let page = atlas.page.get(i as usize).copied().unwrap_or(0);
+    let h = map.sample(page, [at(0), at(1)]);
+    let raw: [Vec2; 2] = std::array::from_fn(|set| {
+        let u = t.uv[set];
+        (u[0].as_dvec2() * b[0] + u[1].as_dvec2() * b[1] + u[2].as_dvec2() * b[2]).as_vec2()
+    });
+    let modulation = |texture: Option<TextureRef>| -> [f64; 3] {
+        let Some(tex) = texture else {
+            return [1.0; 3];
+        };
+        let Some(mean) = means.get(&tex.image) else {
+            return [1.0; 3];
+        };
+        let texel = tex.sample_linear(&scene.images, tex.uv(raw));
+        std::array::from_fn(|c| {
+            if mean[c] > 0.0 {
+                f64::from(texel[c]) / mean[c]
+            } else {
+                1.0
             }
         })
+    };
+    let (kr, ke) = (
+        modulation(s.base_color_texture),
+        modulation(s.emissive_texture),
+    );
+    let l = std::array::from_fn(|c| {
+        (s.reflectance[c] * kr[c]).clamp(0.0, 1.0) * h[c] + s.emission[c] * ke[c]
+    });
+    ShownPoint {
+        triangle: i,
+        position: x,
+        h,
+        l,
+    }
+}
+
+/// Most samples along a triangle's edge in [`surface_means`] (so at most `MAX_SPLIT²` per
+/// triangle): a 20 m floor of two triangles under 5 000 boxes needs its texels' worth (1 400
+/// a side), or a coarser lattice beats against the boxes' grid.
+pub const MAX_SPLIT: u32 = 4096;
+
+/// The mean over each static surface of what the renderer shows (`L`, as [`shown_at`]
+/// computes it at a point), area-weighted: the light map's counterpart of the bake's
+/// `surfaces.csv` (the solution's means) and of `radiant reference`'s (the path tracer's), so
+/// that the three compare surface by surface and the light lost in the solution is told apart
+/// from the light lost in its reconstruction into texels. A point where `open(triangle, x)` is
+/// false (inside or under other geometry: nobody sees it) counts dark, as the path tracer,
+/// which samples the whole surface, finds it.
+///
+/// Each triangle is cut into `n²` equal sub-triangles and `L` taken at their centroids, `n`
+/// its longest edge on the atlas in texels (rounded up; 1 to [`MAX_SPLIT`]), so about two
+/// samples per texel, and every bilinear ramp the renderer draws is sampled. Surfaces without
+/// a static triangle are left out, as in `surfaces.csv`; areas in scene units².
+///
+/// # Errors
+/// [`PointError::AtlasMismatch`] when `atlas` is not `scene`'s.
+pub fn surface_means(
+    scene: &Scene,
+    atlas: &Atlas,
+    map: &LightMap,
+    open: impl Fn(u32, DVec3) -> bool + Sync,
+) -> Result<Vec<SurfaceMean>, PointError> {
+    if atlas.uv.len() != scene.triangles.len() {
+        return Err(PointError::AtlasMismatch {
+            atlas: atlas.uv.len(),
+            scene: scene.triangles.len(),
+        });
+    }
+    let roots = static_roots(scene);
+    let lit: Vec<u32> = (0..scene.triangles.len() as u32)
+        .filter(|&i| roots[i as usize].is_some())
+        .collect();
+    let means = texture_means(scene, lit.iter().copied());
+    let side = f64::from(map.width.max(map.height));
+    // Per triangle: its surface, area and the mean of L over it (f64 throughout).
+    let per_triangle: Vec<(u32, f64, Rgb)> = lit
+        .par_iter()
+        .map(|&i| {
+            let t = &scene.triangles[i as usize];
+            let uv = atlas.uv[i as usize];
+            let edge = (0..3)
+                .map(|k| (uv[(k + 1) % 3] - uv[k]).length())
+                .fold(0.0f32, f32::max);
+            let n = (f64::from(edge) * side)
+                .ceil()
+                .clamp(1.0, f64::from(MAX_SPLIT)) as u32;
+            let mut sum = [0.0; 3];
+            for (b1, b2) in lattice(n) {
+                let x = t.vertices[0] * (1.0 - b1 - b2) + t.vertices[1] * b1 + t.vertices[2] * b2;
+                if !open(i, x) {
+                    continue;
+                }
+                let l = shown(scene, atlas, map, &means, i, x).l;
+                for c in 0..3 {
+                    sum[c] += l[c];
+                }
+            }
+            let k = f64::from(n * n);
+            (t.surface, t.area(), sum.map(|v| v / k))
+        })
+        .collect();
+    let mut acc = vec![(0.0, [0.0; 3]); scene.surfaces.len()];
+    for (s, area, l) in per_triangle {
+        let a = &mut acc[s as usize];
+        a.0 += area;
+        for c in 0..3 {
+            a.1[c] += area * l[c];
+        }
+    }
+    Ok(scene
+        .surfaces
+        .iter()
+        .zip(acc)
+        .filter(|(_, (a, _))| *a > 0.0)
+        .map(|(s, (a, m))| SurfaceMean {
+            name: s.name.clone(),
+            area: a,
+            mean: m.map(|v| v / a),
+            emitter: s.is_emitter(),
+        })
         .collect())
+}
+
+/// The centroids of the `n²` equal sub-triangles of a triangle cut `n` times along each edge,
+/// as barycentric `(b1, b2)` (the weight of the first vertex is `1 − b1 − b2`).
+fn lattice(n: u32) -> impl Iterator<Item = (f64, f64)> {
+    let f = f64::from(n);
+    (0..n).flat_map(move |i| {
+        (0..n - i).flat_map(move |j| {
+            let (i, j) = (f64::from(i), f64::from(j));
+            let up = ((i + 1.0 / 3.0) / f, (j + 1.0 / 3.0) / f);
+            let down = ((i + 2.0 / 3.0) / f, (j + 2.0 / 3.0) / f);
+            // The sub-triangle pointing down exists where one more fits: i + j ≤ n − 2.
+            let has_down = i + j + 2.0 <= f;
+            std::iter::once(up).chain(has_down.then_some(down))
+        })
+    })
 }
 
 #[cfg(test)]
@@ -347,6 +471,76 @@ mod tests {
         assert!(matches!(
             locate_all(&scene, &off),
             Err(PointError::OffSurface { index: 0, .. })
+        ));
+    }
+
+    #[test]
+    fn the_lattice_cuts_a_triangle_into_equal_parts() {
+        for n in [1, 2, 3, 7, 32, 301] {
+            let points: Vec<_> = lattice(n).collect();
+            assert_eq!(points.len(), (n * n) as usize);
+            assert!(
+                points
+                    .iter()
+                    .all(|&(a, b)| a > 0.0 && b > 0.0 && a + b < 1.0)
+            );
+            // Equal parts: the mean of a linear function is its value at the centroid.
+            let k = f64::from(n * n);
+            let mean_b1 = points.iter().map(|p| p.0).sum::<f64>() / k;
+            let mean_b2 = points.iter().map(|p| p.1).sum::<f64>() / k;
+            assert!((mean_b1 - 1.0 / 3.0).abs() < 1e-12, "n {n}: {mean_b1}");
+            assert!((mean_b2 - 1.0 / 3.0).abs() < 1e-12, "n {n}: {mean_b2}");
+        }
+    }
+
+    #[test]
+    fn a_surface_mean_is_the_area_weighted_mean_of_what_is_shown() {
+        let mut scene = quad_scene(false);
+        // A second surface, 2 m² and emitting, on the far side of x = 1.
+        scene.surfaces.push(Surface {
+            name: "lamp".into(),
+            reflectance: [0.0; 3],
+            emission: [3.0, 3.0, 3.0],
+            ..Surface::default()
+        });
+        let v = |x: f64, z: f64| DVec3::new(x, 0.0, z);
+        scene
+            .triangles
+            .push(Triangle::new([v(2.0, 0.0), v(2.0, 2.0), v(4.0, 2.0)], 1));
+        let atlas = Atlas::new(&scene, Some(8.0)).expect("atlas");
+        let map = LightMap {
+            width: atlas.width,
+            height: atlas.height,
+            pages: atlas.pages,
+            texels: vec![[2.0, 4.0, 8.0]; (atlas.width * atlas.height * atlas.pages) as usize],
+        };
+        let means = surface_means(&scene, &atlas, &map, |_, _| true).expect("on the atlas");
+        assert_eq!(means.len(), 2);
+        assert_eq!(means[0].name, "floor");
+        assert!((means[0].area - 1.0).abs() < 1e-12);
+        assert!(
+            means[0].mean.iter().all(|&l| (l - 1.0).abs() < 1e-12),
+            "{:?}",
+            means[0].mean
+        );
+        assert!(!means[0].emitter);
+        assert!((means[1].area - 2.0).abs() < 1e-12);
+        assert_eq!(means[1].mean, [3.0; 3]);
+        assert!(means[1].emitter);
+        // Points that nobody sees (here the half x < 0.5 of the floor) count dark.
+        let half = surface_means(&scene, &atlas, &map, |_, x| x.x >= 0.5).expect("on the atlas");
+        assert!(
+            half[0].mean.iter().all(|&l| (l - 0.5).abs() < 0.02),
+            "{:?}",
+            half[0].mean
+        );
+        assert!((half[0].area - 1.0).abs() < 1e-12);
+        // A map that is not the scene's is refused.
+        let mut other = scene.clone();
+        other.triangles.pop();
+        assert!(matches!(
+            surface_means(&other, &atlas, &map, |_, _| true),
+            Err(PointError::AtlasMismatch { .. })
         ));
     }
 }

@@ -140,6 +140,15 @@ impl<V: Visibility> TexelLights<V> {
             })
     }
 
+    /// Whether the point `x` (world units) of scene triangle `triangle` lies in the open: not
+    /// inside or under other geometry (see [`Self::sample`]).
+    pub fn open_at(&self, triangle: usize, x: DVec3) -> bool {
+        match self.tris.get(triangle) {
+            Some(Some((_, n))) => !self.buried(self.frame.to_local(x), *n),
+            _ => true,
+        }
+    }
+
     /// The texel that [`Atlas::fill`] fills from `triangle` at weights `(u, v)` (see the
     /// module): where its light is read, and the lights' direct part.
     pub fn sample(&self, triangle: usize, u: f32, v: f32) -> TexelSample {
@@ -254,6 +263,24 @@ pub fn compose_lightmap(
     let masks = crate::input::masks(&crate::input::static_scene(scene));
     let bvh = crate::input::visibility(mesh, masks.as_ref());
     compose_with(scene, atlas, mesh, system, radiosity, bvh)
+}
+
+/// What the renderer shows of `map` (a light map of `scene` on `atlas`, baked on `mesh`),
+/// averaged over each surface ([`crate::points::surface_means`]), a point buried under other
+/// geometry counted dark as [`compose_lightmap`] finds it (with the bake's rays, built again).
+///
+/// # Errors
+/// [`crate::points::PointError::AtlasMismatch`] when `atlas` is not `scene`'s.
+pub fn shown_surface_means(
+    scene: &Scene,
+    atlas: &Atlas,
+    mesh: &Mesh,
+    map: &LightMap,
+) -> Result<Vec<crate::metrics::SurfaceMean>, crate::points::PointError> {
+    let masks = crate::input::masks(&crate::input::static_scene(scene));
+    let bvh = crate::input::visibility(mesh, masks.as_ref());
+    let lights = TexelLights::new(scene, atlas, mesh, bvh);
+    crate::points::surface_means(scene, atlas, map, |i, x| lights.open_at(i as usize, x))
 }
 
 /// [`compose_lightmap`] with the rays of `vis`.
