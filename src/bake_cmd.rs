@@ -384,13 +384,29 @@ fn write_outputs(args: &BakeArgs, job: &Job, result: &BakeResult) -> anyhow::Res
         });
         let lap = Instant::now();
         // The punctual lights' direct light per texel, the rest from the smooth field.
-        let map = radiant::radiosity::texel_light::compose_lightmap(
-            &job.scene,
-            &job.atlas,
-            &result.mesh,
-            &result.system,
-            &result.radiosity,
-        );
+        let map = match args.final_gather {
+            0 => radiant::radiosity::texel_light::compose_lightmap(
+                &job.scene,
+                &job.atlas,
+                &result.mesh,
+                &result.system,
+                &result.radiosity,
+            ),
+            strata => radiant::radiosity::texel_light::compose_gathered(
+                &job.scene,
+                &job.atlas,
+                &result.mesh,
+                &result.system,
+                &result.radiosity,
+                radiant::radiosity::final_gather::GatherParams {
+                    strata,
+                    seed: job.params.ff.seed,
+                    stride: args.gather_stride,
+                    filter_radius: args.gather_radius.max(args.gather_stride),
+                    ..Default::default()
+                },
+            ),
+        };
         let lightmap_s = lap.elapsed().as_secs_f64();
         let lap = Instant::now();
         let light = output::write_lightmaps(out, &map)
@@ -517,6 +533,16 @@ fn report_json(
             "utilisation": atlas.utilisation(),
             "atlas_seconds": job.atlas_s,
             "seconds": w.lightmap_s,
+            "final_gather": match args.final_gather {
+                0 => serde_json::Value::Null,
+                strata => json!({
+                    "strata": strata,
+                    "rays_per_gather": strata * strata,
+                    "stride": args.gather_stride,
+                    "radius": args.gather_radius.max(args.gather_stride),
+                    "emitter_samples": radiant::radiosity::final_gather::GatherParams::default().emitter_samples,
+                }),
+            },
             "write_seconds": w.write_s,
         },
         "export": w.export,

@@ -21,6 +21,7 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand};
 use radiant::radiosity::cluster::ClusterParams;
+use radiant::radiosity::final_gather::GatherParams;
 use radiant::radiosity::{
     BakeParams, FormFactorKind, FormFactorParams, LinkParams, MeshParams, SolverKind, SolverParams,
 };
@@ -178,6 +179,22 @@ pub(crate) struct BakeArgs {
     #[arg(long, default_value_t = radiant::scene::atlas::MAX_SIDE,
           value_parser = clap::value_parser!(u32).range(64..=8192))]
     pub(crate) lightmap_page: u32,
+    /// Final gather: the light map's light other than the punctual lights' direct part is
+    /// gathered at every texel with STRATA² rays into the solution (and 16 points on the
+    /// emitters), instead of interpolated from the elements; 0: interpolated (fastest).
+    #[arg(long, value_name = "STRATA", default_value_t = 0,
+          value_parser = clap::value_parser!(u32).range(0..=64))]
+    pub(crate) final_gather: u32,
+    /// With --final-gather: rays are shot at every N-th texel along each axis, and each texel
+    /// takes the mean of those within --gather-radius on its surface (1: at every texel).
+    #[arg(long, value_name = "N", default_value_t = GatherParams::default().stride,
+          value_parser = clap::value_parser!(u32).range(1..=16))]
+    pub(crate) gather_stride: u32,
+    /// With --final-gather: the radius, in texels, of the window whose gathered rays a texel
+    /// averages (at least the stride).
+    #[arg(long, value_name = "TEXELS", default_value_t = GatherParams::default().filter_radius,
+          value_parser = clap::value_parser!(u32).range(0..=16))]
+    pub(crate) gather_radius: u32,
     #[command(flatten)]
     pub(crate) hierarchy: HierarchyArgs,
     #[command(flatten)]

@@ -939,3 +939,45 @@ fn the_readme_quick_start_is_what_ci_runs() {
         "ARCHITECTURE.md is a map: at most 400 lines"
     );
 }
+
+/// `--final-gather`: the light map gathered per texel, its settings in the report, and a bad
+/// setting refused before any work.
+#[test]
+fn bake_final_gather_is_reported_and_bad_settings_are_refused() {
+    let out = tmp("final-gather");
+    let args = [
+        "bake",
+        "--builtin",
+        "cornell-box",
+        "--final-gather",
+        "3",
+        "--gather-stride",
+        "1",
+    ];
+    run_ok(&args, &out);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report"))
+            .expect("json");
+    let gather = &report["parameters"]["lightmap"]["final_gather"];
+    assert_eq!(gather["rays_per_gather"], 9);
+    assert_eq!(gather["stride"], 1);
+    assert_eq!(gather["radius"], 2);
+    // Off by default: the smooth field, no gather in the report.
+    let plain = tmp("final-gather-off");
+    run_ok(&["bake", "--builtin", "cornell-box"], &plain);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(plain.join("report.json")).expect("report"))
+            .expect("json");
+    assert!(report["parameters"]["lightmap"]["final_gather"].is_null());
+    for bad in [["--final-gather", "65"], ["--gather-stride", "0"]] {
+        let st = radiant()
+            .args(["bake", "--builtin", "cornell-box", "--out"])
+            .arg(&*out)
+            .args(bad)
+            .output()
+            .expect("runs");
+        assert!(!st.status.success(), "{bad:?} accepted");
+        let stderr = String::from_utf8_lossy(&st.stderr);
+        assert!(stderr.contains(bad[0]), "{bad:?}: {stderr}");
+    }
+}

@@ -25,6 +25,7 @@ pub mod bake;
 pub mod checkpoint;
 pub mod cluster;
 pub mod exposure;
+pub mod final_gather;
 pub mod form_factors;
 pub mod hierarchy;
 pub mod input;

@@ -284,6 +284,10 @@ fn shown(
 /// a side), or a coarser lattice beats against the boxes' grid.
 pub const MAX_SPLIT: u32 = 4096;
 
+/// Samples per texel along a triangle's edge in [`surface_means`]: a sample every two texels,
+/// which the bilinear ramps between texel centres average over.
+const SAMPLES_PER_TEXEL: f64 = 0.5;
+
 /// The mean over each static surface of what the renderer shows (`L`, as [`shown_at`]
 /// computes it at a point), area-weighted: the light map's counterpart of the bake's
 /// `surfaces.csv` (the solution's means) and of `radiant reference`'s (the path tracer's), so
@@ -293,8 +297,7 @@ pub const MAX_SPLIT: u32 = 4096;
 /// which samples the whole surface, finds it.
 ///
 /// Each triangle is cut into `n²` equal sub-triangles and `L` taken at their centroids, `n`
-/// its longest edge on the atlas in texels (rounded up; 1 to [`MAX_SPLIT`]), so about two
-/// samples per texel, and every bilinear ramp the renderer draws is sampled. Surfaces without
+/// half its longest edge on the atlas in texels (rounded up; 1 to [`MAX_SPLIT`]). Surfaces without
 /// a static triangle are left out, as in `surfaces.csv`; areas in scene units².
 ///
 /// # Errors
@@ -326,7 +329,7 @@ pub fn surface_means(
             let edge = (0..3)
                 .map(|k| (uv[(k + 1) % 3] - uv[k]).length())
                 .fold(0.0f32, f32::max);
-            let n = (f64::from(edge) * side)
+            let n = (f64::from(edge) * side * SAMPLES_PER_TEXEL)
                 .ceil()
                 .clamp(1.0, f64::from(MAX_SPLIT)) as u32;
             let mut sum = [0.0; 3];
@@ -368,7 +371,7 @@ pub fn surface_means(
 
 /// The centroids of the `n²` equal sub-triangles of a triangle cut `n` times along each edge,
 /// as barycentric `(b1, b2)` (the weight of the first vertex is `1 − b1 − b2`).
-fn lattice(n: u32) -> impl Iterator<Item = (f64, f64)> {
+pub(crate) fn lattice(n: u32) -> impl Iterator<Item = (f64, f64)> {
     let f = f64::from(n);
     (0..n).flat_map(move |i| {
         (0..n - i).flat_map(move |j| {

@@ -32,8 +32,10 @@ use radiant_scene::{Light, Scene};
 use radiant_visibility::Visibility;
 use rayon::prelude::*;
 
+use crate::final_gather::{FinalGather, GatherParams};
 use crate::lightmap::{LightMap, static_roots};
 use crate::mesh::{Frame, Mesh};
+use crate::rng::hash;
 use crate::smooth::SmoothField;
 use crate::system::{Rgb, System};
 
@@ -264,6 +266,177 @@ pub fn compose_lightmap(
     let bvh = crate::input::visibility(mesh, masks.as_ref());
     compose_with(scene, atlas, mesh, system, radiosity, bvh)
 }
+
+/// The light map of a bake as [`compose_lightmap`] composes it, but for the rest of the light
+/// (all but the punctual lights' direct part): a final gather at each texel
+/// ([`crate::final_gather`]) instead of the smooth field, so that a texel near a contact or in
+/// an element's shadowed part takes the light its own point receives.
+pub fn compose_gathered(
+    scene: &Scene,
+    atlas: &Atlas,
+    mesh: &Mesh,
+    system: &System,
+    radiosity: &[Rgb],
+    params: GatherParams,
+) -> LightMap {
+    let masks = crate::input::masks(&crate::input::static_scene(scene));
+    let bvh = crate::input::visibility(mesh, masks.as_ref());
+    let lights = TexelLights::new(scene, atlas, mesh, bvh);
+    let field = SmoothField::new(mesh, system, &scene.surfaces, radiosity);
+    let gather = FinalGather::new(scene, mesh, &field, &lights.vis, params);
+    let (width, height) = (atlas.width.max(1) as usize, atlas.height as usize);
+    let size = width * height;
+    let mut texels = vec![[0.0f32; 3]; size * atlas.pages as usize];
+    let r = i64::from(params.filter_radius);
+    let stride = params.stride.max(1) as usize;
+    let s = stride as i64;
+    // A twentieth of a texel, in the mesh's frame.
+    let nudge = 0.05 / atlas.density / mesh.frame.scale;
+    for (page, texels) in texels.chunks_exact_mut(size.max(1)).enumerate() {
+        let owners = atlas.owners(scene, page as u32);
+        if owners.len() != texels.len() {
+            continue;
+        }
+        // Where texel `k` gathers (its sample's point, nudged off the triangle's edges: a ring
+        // texel lies on one, and a point on the edge of a floor and a wall is in the wall's
+        // plane, where its rays and form factors miss the wall), its normal and its key.
+        let point = |k: usize, at: (f32, f32)| -> Option<(DVec3, DVec3, u64)> {
+            let o = owners[k];
+            let (p, n) = lights.tris.get(o.triangle as usize).copied().flatten()?;
+            let (a, b) = (f64::from(at.0), f64::from(at.1));
+            let x = p[0] + (p[1] - p[0]) * a + (p[2] - p[0]) * b;
+            let to_centre = (p[0] + p[1] + p[2]) / 3.0 - x;
+            let x = x + to_centre.clamp_length_max(nudge.min(0.5 * to_centre.length()));
+            let key = hash(
+                u64::from(o.triangle),
+                u64::from(at.0.to_bits()),
+                u64::from(at.1.to_bits()),
+            );
+            Some((x, n, key))
+        };
+        // Pass 1, per texel: the exact part (the lights' and the emitters' direct light) into
+        // the map, whether it is open, and on the stride's lattice the rays' part (NaN
+        // elsewhere): 13 bytes a texel.
+        let mut rays = vec![[f32::NAN; 3]; size];
+        let mut open = vec![false; size];
+        let mut buried = vec![false; size];
+        texels
+            .par_chunks_mut(width)
+            .zip(rays.par_chunks_mut(width))
+            .zip(open.par_chunks_mut(width))
+            .zip(buried.par_chunks_mut(width))
+            .enumerate()
+            .for_each(|(y, (((trow, rrow), orow), brow))| {
+                for x in 0..trow.len() {
+                    let k = y * width + x;
+                    let o = owners[k];
+                    if lights
+                        .tris
+                        .get(o.triangle as usize)
+                        .is_none_or(Option::is_none)
+                    {
+                        continue;
+                    }
+                    let s = lights.sample(o.triangle as usize, o.u, o.v);
+                    let Some(at) = s.at else {
+                        brow[x] = true;
+                        continue;
+                    };
+                    let Some((p, n, key)) = point(k, at) else {
+                        continue;
+                    };
+                    orow[x] = true;
+                    let emitted = gather.emitted(p, n, key);
+                    trow[x] = std::array::from_fn(|c| (s.direct[c] + emitted[c]) as f32);
+                    if x % stride == 0 && y % stride == 0 {
+                        rrow[x] = gather.reflected(p, n, key).map(|g| g as f32);
+                    }
+                }
+            });
+        // Where a texel lies and faces, in the mesh's frame, and its surface.
+        let place = |k: usize| -> Option<(DVec3, DVec3, u32)> {
+            let o = owners[k];
+            let (p, n) = lights.tris.get(o.triangle as usize).copied().flatten()?;
+            let (a, b) = (f64::from(o.u), f64::from(o.v));
+            let x = p[0] + (p[1] - p[0]) * a + (p[2] - p[0]) * b;
+            Some((x, n, scene.triangles[o.triangle as usize].surface))
+        };
+        // Neighbours within the window's reach in the scene (the mesh's frame): the same chart,
+        // not one packed beside it.
+        let reach = (r as f64 + 1.0) * std::f64::consts::SQRT_2 / atlas.density / mesh.frame.scale;
+        // Pass 2: each open texel adds the mean of the rays' parts gathered on its surface
+        // within the window; one with none (a chart of a few texels) gathers its own.
+        texels
+            .par_chunks_mut(width)
+            .enumerate()
+            .for_each(|(y, row)| {
+                for (x, t) in row.iter_mut().enumerate() {
+                    let k = y * width + x;
+                    if !open[k] {
+                        continue;
+                    }
+                    let Some((pk, nk, sk)) = place(k) else {
+                        continue;
+                    };
+                    let (mut sum, mut count) = ([0.0f64; 3], 0.0);
+                    // The lattice's texels in the window: the first multiple of the stride at
+                    // or after its corner, then every stride-th.
+                    let first = |c: usize| {
+                        let lo = (c as i64 - r).max(0);
+                        (lo + (s - lo % s) % s, (c as i64 + r))
+                    };
+                    let ((y0, y1), (x0, x1)) = (first(y), first(x));
+                    for ny in (y0..=y1.min(height as i64 - 1)).step_by(s as usize) {
+                        for nx in (x0..=x1.min(width as i64 - 1)).step_by(s as usize) {
+                            let j = ny as usize * width + nx as usize;
+                            if rays[j][0].is_nan() {
+                                continue;
+                            }
+                            let same = j == k
+                                || place(j).is_some_and(|(pj, nj, sj)| {
+                                    sj == sk && pj.distance(pk) <= reach && nj.dot(nk) >= SAME_PLANE
+                                });
+                            if same {
+                                for c in 0..3 {
+                                    sum[c] += f64::from(rays[j][c]);
+                                }
+                                count += 1.0;
+                            }
+                        }
+                    }
+                    let mean = if count > 0.0 {
+                        sum.map(|v| v / count)
+                    } else {
+                        let o = owners[k];
+                        let s = lights.sample(o.triangle as usize, o.u, o.v);
+                        match s.at.and_then(|at| point(k, at)) {
+                            Some((p, n, key)) => gather.reflected(p, n, key),
+                            None => [0.0; 3],
+                        }
+                    };
+                    for c in 0..3 {
+                        t[c] = (f64::from(t[c]) + mean[c]) as f32;
+                    }
+                }
+            });
+        dilate_buried(
+            texels,
+            &buried,
+            &owners,
+            scene,
+            (width, 2.5 / atlas.density),
+        );
+    }
+    LightMap {
+        width: atlas.width,
+        height: atlas.height,
+        pages: atlas.pages,
+        texels,
+    }
+}
+
+/// Normals that share a filtered gather: within 25°, as the smooth field's vertices.
+const SAME_PLANE: f64 = 0.906;
 
 /// What the renderer shows of `map` (a light map of `scene` on `atlas`, baked on `mesh`),
 /// averaged over each surface ([`crate::points::surface_means`]), a point buried under other

@@ -1,0 +1,354 @@
+//! A final gather per light-map texel (Christensen's final gather; Lischinski et al. 1993):
+//! each texel's light other than the punctual lights' direct part, computed at the texel's own
+//! point with its own rays into the solved scene, instead of interpolated from its element.
+//!
+//! `H` at a point `x` with normal `n` (incident radiance, emissive units: a surface of albedo
+//! `a` reflects `a H`) is `1/π ∫ L(ω) cos θ dω`. With cosine-weighted directions that is the
+//! mean of the radiance the rays meet:
+//!
+//! - a ray that meets a surface from its lit side takes the solution's radiosity there (the
+//!   smooth field, [`SmoothField::radiosity`]) less its emission: the reflected light, which
+//!   includes every bounce and the punctual lights' light as the elements carry it;
+//! - a ray that meets the back of a single-sided face (inside closed geometry) takes nothing;
+//! - a ray that leaves the scene takes the sky's radiance.
+//!
+//! Emitters' direct light is sampled on the emitters instead (an emitter the size of a ceiling
+//! panel is met by few rays): points on emitting triangles chosen by power, each with a
+//! shadow ray, `E cos θx cos θy / (π r²)` over their density. The punctual lights' direct light
+//! is not here: [`crate::texel_light`] computes it per texel with its own shadow rays.
+//!
+//! Directions are stratified (`s × s` strata of the cosine-weighted hemisphere, one jittered
+//! ray each) and the emitter samples too, from a generator seeded by the seed and the point,
+//! so a gather gives the same bits on any thread count.
+
+use glam::DVec3;
+use radiant_scene::{Scene, Sky};
+use radiant_visibility::Visibility;
+
+use crate::form_factors::analytic::point_to_triangle;
+use crate::mesh::Mesh;
+use crate::rng::{Rng, hash};
+use crate::smooth::SmoothField;
+use crate::system::Rgb;
+
+/// In a penumbra (an emitter's parts partly hidden), its shadow rays go to parts this many
+/// times finer along each edge.
+pub const PENUMBRA: u32 = 4;
+
+/// How a final gather samples a texel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GatherParams {
+    /// Strata per side of the hemisphere: `strata²` rays per texel.
+    pub strata: u32,
+    /// Shadow rays per emitting triangle (the centroids of this many equal parts, rounded up
+    /// to a square; 0: no emitters' direct light), or points sampled on all of them by power
+    /// past `analytic_emitters` triangles.
+    pub emitter_samples: u32,
+    /// Up to this many emitting triangles, each texel takes each one's exact form factor
+    /// (Lambert's contour integral) and shadow rays to its parts; past it, `emitter_samples`
+    /// points sampled on them by power.
+    pub analytic_emitters: usize,
+    /// Seed of the rays.
+    pub seed: u64,
+    /// The rays' part is averaged over the open texels of the same surface within this many
+    /// texels (a `(2r + 1)²` window, normals within 25°): the noise of `strata²` rays falls as
+    /// if each texel had shot `(2r + 1)²` times as many, and light changes sharper than `r`
+    /// texels blur.
+    pub filter_radius: u32,
+    /// Rays are shot at every `stride`-th texel along each axis of the atlas (1: at every
+    /// texel) and the filter spreads them to the others; a texel with no such neighbour on its
+    /// surface (a chart of a few texels) shoots its own.
+    pub stride: u32,
+}
+
+impl Default for GatherParams {
+    fn default() -> Self {
+        GatherParams {
+            strata: 8,
+            emitter_samples: 16,
+            analytic_emitters: 64,
+            seed: 1,
+            filter_radius: 2,
+            stride: 2,
+        }
+    }
+}
+
+/// An emitting input triangle, in the mesh's frame.
+#[derive(Clone, Copy, Debug)]
+struct Emitter {
+    v: [DVec3; 3],
+    normal: DVec3,
+    area: f64,
+    emission: Rgb,
+    double_sided: bool,
+}
+
+/// Gathers light at points of a solved bake (see the module).
+pub struct FinalGather<'a, V> {
+    mesh: &'a Mesh,
+    vis: &'a V,
+    field: &'a SmoothField,
+    params: GatherParams,
+    /// Per input triangle of the mesh: its surface's emission and whether it is double-sided.
+    root_emission: Vec<Rgb>,
+    double_sided: Vec<bool>,
+    emitters: Vec<Emitter>,
+    /// Cumulative power of the emitters (the last entry is the total).
+    cdf: Vec<f64>,
+    sky: Option<Sky>,
+}
+
+impl<'a, V: Visibility> FinalGather<'a, V> {
+    /// A gather over `mesh` (a bake of `scene`'s static part) whose solution is `field`, with
+    /// the rays of `vis` (over `mesh`'s input triangles, in its frame).
+    pub fn new(
+        scene: &Scene,
+        mesh: &'a Mesh,
+        field: &'a SmoothField,
+        vis: &'a V,
+        params: GatherParams,
+    ) -> FinalGather<'a, V> {
+        let surface = |root: usize| {
+            mesh.root_surface
+                .get(root)
+                .and_then(|&s| scene.surfaces.get(s as usize))
+        };
+        let root_emission: Vec<Rgb> = (0..mesh.roots.len())
+            .map(|r| surface(r).map_or([0.0; 3], |s| s.emission))
+            .collect();
+        let double_sided: Vec<bool> = (0..mesh.roots.len())
+            .map(|r| surface(r).is_some_and(|s| s.double_sided))
+            .collect();
+        let mut emitters = Vec::new();
+        let mut cdf = Vec::new();
+        let mut total = 0.0;
+        for (r, &id) in mesh.roots.iter().enumerate() {
+            let e = root_emission[r];
+            if e.iter().all(|&c| c <= 0.0) {
+                continue;
+            }
+            let v = mesh.nodes[id as usize].v;
+            let cross = (v[1] - v[0]).cross(v[2] - v[0]);
+            let area = 0.5 * cross.length();
+            let power = area * (e[0] + e[1] + e[2]);
+            if !(power > 0.0 && power.is_finite()) {
+                continue;
+            }
+            total += power;
+            cdf.push(total);
+            emitters.push(Emitter {
+                v,
+                normal: cross / (2.0 * area),
+                area,
+                emission: e,
+                double_sided: double_sided[r],
+            });
+        }
+        FinalGather {
+            mesh,
+            vis,
+            field,
+            params,
+            root_emission,
+            double_sided,
+            emitters,
+            cdf,
+            sky: scene.sky.clone().filter(|s| !s.is_dark()),
+        }
+    }
+
+    /// `H` at `x` (the mesh's frame) on a surface of unit normal `n`, from the solution, the
+    /// emitters and the sky (see the module); `key` seeds its rays.
+    pub fn gather(&self, x: DVec3, n: DVec3, key: u64) -> Rgb {
+        let (exact, rays) = self.gather_parts(x, n, key);
+        std::array::from_fn(|k| exact[k] + rays[k])
+    }
+
+    /// [`Self::gather`] in two parts: the emitters' direct light (exact where unoccluded) and
+    /// the rays' mean (noisy: what a filter may smooth).
+    pub fn gather_parts(&self, x: DVec3, n: DVec3, key: u64) -> (Rgb, Rgb) {
+        (self.emitted(x, n, key), self.reflected(x, n, key))
+    }
+
+    /// The emitters' direct `H` at `x` (normal `n`); `key` seeds its samples.
+    pub fn emitted(&self, x: DVec3, n: DVec3, key: u64) -> Rgb {
+        let mut rng = Rng::new(hash(self.params.seed, key, 0x656d_6974));
+        self.emitters_direct(x, n, &mut rng)
+    }
+
+    /// The reflected light and the sky's at `x` (normal `n`): the mean of what `strata²`
+    /// cosine-weighted rays meet; `key` seeds them.
+    pub fn reflected(&self, x: DVec3, n: DVec3, key: u64) -> Rgb {
+        let mut rng = Rng::new(hash(self.params.seed, key, 0x6761_7468));
+        let (t, b) = basis(n);
+        // Rays start a little above the surface, as the bake's own rays do.
+        let origin = x + n * 1e-5;
+        let s = self.params.strata.max(1);
+        let mut sum = [0.0; 3];
+        for i in 0..s * s {
+            let (a, c) = (
+                (f64::from(i % s) + rng.f64()) / f64::from(s),
+                (f64::from(i / s) + rng.f64()) / f64::from(s),
+            );
+            // Cosine-weighted (Malley): a uniform point on the disc, lifted.
+            let (r, phi) = (a.sqrt(), std::f64::consts::TAU * c);
+            let d = t * (r * phi.cos()) + b * (r * phi.sin()) + n * (1.0 - a).max(0.0).sqrt();
+            let l = self.radiance(origin, d);
+            for k in 0..3 {
+                sum[k] += l[k];
+            }
+        }
+        sum.map(|v| v / f64::from(s * s))
+    }
+
+    /// The reflected radiance (and the sky's) a ray from `origin` along unit `d` meets.
+    fn radiance(&self, origin: DVec3, d: DVec3) -> Rgb {
+        match self
+            .vis
+            .closest_hit(origin.as_vec3(), d.as_vec3(), f32::INFINITY)
+        {
+            Some(hit) => {
+                let root = hit.triangle as usize;
+                if root >= self.mesh.roots.len() {
+                    return [0.0; 3];
+                }
+                if !hit.front && !self.double_sided[root] {
+                    return [0.0; 3];
+                }
+                let b = self.field.radiosity(
+                    self.mesh,
+                    hit.triangle,
+                    f64::from(hit.u),
+                    f64::from(hit.v),
+                );
+                let e = self.root_emission[root];
+                std::array::from_fn(|k| (b[k] - e[k]).max(0.0))
+            }
+            None => self.sky.as_ref().map_or([0.0; 3], |s| s.radiance(d)),
+        }
+    }
+
+    /// The emitters' direct `H` at `x`: with few emitting triangles, each one's exact
+    /// unoccluded form factor (Lambert's contour integral) times the share of it that is
+    /// visible, from shadow rays to the centroids of `k²` equal parts weighted by the kernel;
+    /// with many, points sampled on them by power.
+    fn emitters_direct(&self, x: DVec3, n: DVec3, rng: &mut Rng) -> Rgb {
+        let m = self.params.emitter_samples;
+        if self.emitters.is_empty() || m == 0 {
+            return [0.0; 3];
+        }
+        if self.emitters.len() > self.params.analytic_emitters {
+            return self.emitters_sampled(x, n, rng);
+        }
+        let from = (x + n * 1e-5).as_vec3();
+        let k = f64::from(m).sqrt().ceil().max(1.0) as u32;
+        let mut sum = [0.0; 3];
+        for e in &self.emitters {
+            let mut f = point_to_triangle(x, n, &e.v, e.normal);
+            if e.double_sided {
+                f += point_to_triangle(x, n, &[e.v[0], e.v[2], e.v[1]], -e.normal);
+            }
+            if f.is_nan() || f <= 0.0 {
+                continue;
+            }
+            // The kernel-weighted share of the parts' centroids a shadow ray reaches; where
+            // they disagree (a penumbra), again on parts PENUMBRA² times finer.
+            let share = |k: u32| -> (f64, f64, bool, bool) {
+                let (mut seen, mut all, mut some, mut none) = (0.0, 0.0, false, false);
+                for (b1, b2) in crate::points::lattice(k) {
+                    let y = e.v[0] * (1.0 - b1 - b2) + e.v[1] * b1 + e.v[2] * b2;
+                    let to = y - x;
+                    let r2 = to.length_squared();
+                    let cos_x = n.dot(to);
+                    let cos_y = e.normal.dot(to);
+                    let cos_y = if e.double_sided { cos_y.abs() } else { -cos_y };
+                    if r2.is_nan() || r2 <= 0.0 || cos_x <= 0.0 || cos_y <= 0.0 {
+                        continue;
+                    }
+                    let w = cos_x * cos_y / (r2 * r2);
+                    all += w;
+                    if self.vis.segment_clear(from, y.as_vec3()) {
+                        seen += w;
+                        some = true;
+                    } else {
+                        none = true;
+                    }
+                }
+                (seen, all, some, none)
+            };
+            let (mut seen, mut all, some, none) = share(k);
+            if some && none {
+                (seen, all, _, _) = share(k * PENUMBRA);
+            }
+            // All parts behind the horizon (a sliver the contour sees): take it as seen.
+            let visible = if all > 0.0 { seen / all } else { 1.0 };
+            for c in 0..3 {
+                sum[c] += e.emission[c] * f * visible;
+            }
+        }
+        sum
+    }
+
+    /// The emitters' direct `H` at `x` from points sampled on them by power.
+    fn emitters_sampled(&self, x: DVec3, n: DVec3, rng: &mut Rng) -> Rgb {
+        let (Some(&total), m) = (self.cdf.last(), self.params.emitter_samples) else {
+            return [0.0; 3];
+        };
+        let mut sum = [0.0; 3];
+        for j in 0..m {
+            // Stratified over the power.
+            let pick = (f64::from(j) + rng.f64()) / f64::from(m) * total;
+            let i = self
+                .cdf
+                .partition_point(|&c| c <= pick)
+                .min(self.cdf.len() - 1);
+            let e = &self.emitters[i];
+            let power = self.cdf[i] - if i > 0 { self.cdf[i - 1] } else { 0.0 };
+            let (mut u, mut v) = (rng.f64(), rng.f64());
+            if u + v > 1.0 {
+                (u, v) = (1.0 - u, 1.0 - v);
+            }
+            let y = e.v[0] + (e.v[1] - e.v[0]) * u + (e.v[2] - e.v[0]) * v;
+            let to = y - x;
+            let r2 = to.length_squared();
+            if r2.is_nan() || r2 <= 0.0 {
+                continue;
+            }
+            let w = to / r2.sqrt();
+            let cos_x = n.dot(w);
+            let cos_y = if e.double_sided {
+                e.normal.dot(w).abs()
+            } else {
+                -e.normal.dot(w)
+            };
+            if cos_x <= 0.0 || cos_y <= 0.0 {
+                continue;
+            }
+            if !self
+                .vis
+                .segment_clear((x + n * 1e-5).as_vec3(), y.as_vec3())
+            {
+                continue;
+            }
+            // The density of y: (power share) / area.
+            let pdf = power / total / e.area;
+            let g = cos_x * cos_y / (std::f64::consts::PI * r2) / pdf;
+            for k in 0..3 {
+                sum[k] += e.emission[k] * g;
+            }
+        }
+        sum.map(|s| s / f64::from(m))
+    }
+}
+
+/// Two unit tangents completing unit `n` to an orthonormal basis (Duff et al. 2017).
+fn basis(n: DVec3) -> (DVec3, DVec3) {
+    let sign = 1.0f64.copysign(n.z);
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    (
+        DVec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
+        DVec3::new(b, sign + n.y * n.y * a, -n.y),
+    )
+}
