@@ -392,20 +392,35 @@ fn write_outputs(args: &BakeArgs, job: &Job, result: &BakeResult) -> anyhow::Res
                 &result.system,
                 &result.radiosity,
             ),
-            strata => radiant::radiosity::texel_light::compose_gathered(
-                &job.scene,
-                &job.atlas,
-                &result.mesh,
-                &result.system,
-                &result.radiosity,
-                radiant::radiosity::final_gather::GatherParams {
-                    strata,
-                    seed: job.params.ff.seed,
-                    stride: args.gather_stride,
-                    filter_radius: args.gather_radius.max(args.gather_stride),
-                    ..Default::default()
-                },
-            ),
+            strata => {
+                let pb = crate::common::progress_bar(1, "light map (final gather)");
+                let log = crate::common::ProgressLog::new();
+                let progress = |done: usize, total: usize| {
+                    pb.set_length(total as u64);
+                    pb.set_position(done as u64);
+                    // Also in the log, every few seconds, for runs without a terminal.
+                    if log.due() {
+                        tracing::info!(target: crate::common::PROGRESS, done, total, "final gather progress (rows)");
+                    }
+                };
+                let map = radiant::radiosity::texel_light::compose_gathered_with_progress(
+                    &job.scene,
+                    &job.atlas,
+                    &result.mesh,
+                    &result.system,
+                    &result.radiosity,
+                    radiant::radiosity::final_gather::GatherParams {
+                        strata,
+                        seed: job.params.ff.seed,
+                        stride: args.gather_stride,
+                        filter_radius: args.gather_radius.max(args.gather_stride),
+                        ..Default::default()
+                    },
+                    &progress,
+                );
+                pb.finish_and_clear();
+                map
+            }
         };
         let lightmap_s = lap.elapsed().as_secs_f64();
         let lap = Instant::now();

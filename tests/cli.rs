@@ -954,7 +954,18 @@ fn bake_final_gather_is_reported_and_bad_settings_are_refused() {
         "--gather-stride",
         "1",
     ];
-    run_ok(&args, &out);
+    let st = radiant()
+        .args(args)
+        .arg("--out")
+        .arg(&*out)
+        .env_remove("RUST_LOG")
+        .env("RADIANT_PROGRESS_SECONDS", "0")
+        .output()
+        .expect("runs");
+    let stderr = String::from_utf8_lossy(&st.stderr);
+    assert!(st.status.success(), "{stderr}");
+    // A long gather says how far it is, also without a terminal.
+    assert!(stderr.contains("final gather progress"), "{stderr}");
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report"))
             .expect("json");

@@ -31,6 +31,10 @@ use crate::rng::{Rng, hash};
 use crate::smooth::SmoothField;
 use crate::system::Rgb;
 
+/// A gathered texel's rays stand for a texel within this share of their harmonic mean
+/// distance.
+pub const VALID: f64 = 0.5;
+
 /// In a penumbra (an emitter's parts partly hidden), its shadow rays go to parts this many
 /// times finer along each edge.
 pub const PENUMBRA: u32 = 4;
@@ -50,10 +54,11 @@ pub struct GatherParams {
     pub analytic_emitters: usize,
     /// Seed of the rays.
     pub seed: u64,
-    /// The rays' part is averaged over the open texels of the same surface within this many
-    /// texels (a `(2r + 1)²` window, normals within 25°): the noise of `strata²` rays falls as
-    /// if each texel had shot `(2r + 1)²` times as many, and light changes sharper than `r`
-    /// texels blur.
+    /// The rays' part is averaged over the gathered texels of the same surface within this
+    /// many texels (a `(2r + 1)²` window, normals within 25°) whose rays' harmonic mean
+    /// distance is at least twice as far ([`VALID`]: Ward's irradiance caching): the noise
+    /// falls as if each texel had shot as many rays as it averages, and where geometry is near
+    /// (a contact) the average shrinks to the texels that see it alike.
     pub filter_radius: u32,
     /// Rays are shot at every `stride`-th texel along each axis of the atlas (1: at every
     /// texel) and the filter spreads them to the others; a texel with no such neighbour on its
@@ -168,7 +173,7 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
     /// [`Self::gather`] in two parts: the emitters' direct light (exact where unoccluded) and
     /// the rays' mean (noisy: what a filter may smooth).
     pub fn gather_parts(&self, x: DVec3, n: DVec3, key: u64) -> (Rgb, Rgb) {
-        (self.emitted(x, n, key), self.reflected(x, n, key))
+        (self.emitted(x, n, key), self.reflected(x, n, key).0)
     }
 
     /// The emitters' direct `H` at `x` (normal `n`); `key` seeds its samples.
@@ -178,14 +183,16 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
     }
 
     /// The reflected light and the sky's at `x` (normal `n`): the mean of what `strata²`
-    /// cosine-weighted rays meet; `key` seeds them.
-    pub fn reflected(&self, x: DVec3, n: DVec3, key: u64) -> Rgb {
+    /// cosine-weighted rays meet; `key` seeds them. Also the harmonic mean of the rays' hit
+    /// distances (infinite when none hits; the mesh's frame): how far the value holds (Ward's
+    /// irradiance caching), small where geometry is near, as at a contact.
+    pub fn reflected(&self, x: DVec3, n: DVec3, key: u64) -> (Rgb, f64) {
         let mut rng = Rng::new(hash(self.params.seed, key, 0x6761_7468));
         let (t, b) = basis(n);
         // Rays start a little above the surface, as the bake's own rays do.
         let origin = x + n * 1e-5;
         let s = self.params.strata.max(1);
-        let mut sum = [0.0; 3];
+        let (mut sum, mut inverse) = ([0.0; 3], 0.0);
         for i in 0..s * s {
             let (a, c) = (
                 (f64::from(i % s) + rng.f64()) / f64::from(s),
@@ -194,27 +201,30 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
             // Cosine-weighted (Malley): a uniform point on the disc, lifted.
             let (r, phi) = (a.sqrt(), std::f64::consts::TAU * c);
             let d = t * (r * phi.cos()) + b * (r * phi.sin()) + n * (1.0 - a).max(0.0).sqrt();
-            let l = self.radiance(origin, d);
+            let (l, t) = self.radiance(origin, d);
             for k in 0..3 {
                 sum[k] += l[k];
             }
+            inverse += 1.0 / t.max(1e-9);
         }
-        sum.map(|v| v / f64::from(s * s))
+        let rays = f64::from(s * s);
+        (sum.map(|v| v / rays), rays / inverse)
     }
 
     /// The reflected radiance (and the sky's) a ray from `origin` along unit `d` meets.
-    fn radiance(&self, origin: DVec3, d: DVec3) -> Rgb {
+    /// And how far it went (infinite when it left the scene).
+    fn radiance(&self, origin: DVec3, d: DVec3) -> (Rgb, f64) {
         match self
             .vis
             .closest_hit(origin.as_vec3(), d.as_vec3(), f32::INFINITY)
         {
             Some(hit) => {
-                let root = hit.triangle as usize;
+                let (root, t) = (hit.triangle as usize, f64::from(hit.t));
                 if root >= self.mesh.roots.len() {
-                    return [0.0; 3];
+                    return ([0.0; 3], t);
                 }
                 if !hit.front && !self.double_sided[root] {
-                    return [0.0; 3];
+                    return ([0.0; 3], t);
                 }
                 let b = self.field.radiosity(
                     self.mesh,
@@ -223,9 +233,12 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
                     f64::from(hit.v),
                 );
                 let e = self.root_emission[root];
-                std::array::from_fn(|k| (b[k] - e[k]).max(0.0))
+                (std::array::from_fn(|k| (b[k] - e[k]).max(0.0)), t)
             }
-            None => self.sky.as_ref().map_or([0.0; 3], |s| s.radiance(d)),
+            None => (
+                self.sky.as_ref().map_or([0.0; 3], |s| s.radiance(d)),
+                f64::INFINITY,
+            ),
         }
     }
 

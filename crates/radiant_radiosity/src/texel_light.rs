@@ -32,7 +32,7 @@ use radiant_scene::{Light, Scene};
 use radiant_visibility::Visibility;
 use rayon::prelude::*;
 
-use crate::final_gather::{FinalGather, GatherParams};
+use crate::final_gather::{FinalGather, GatherParams, VALID};
 use crate::lightmap::{LightMap, static_roots};
 use crate::mesh::{Frame, Mesh};
 use crate::rng::hash;
@@ -279,6 +279,20 @@ pub fn compose_gathered(
     radiosity: &[Rgb],
     params: GatherParams,
 ) -> LightMap {
+    compose_gathered_with_progress(scene, atlas, mesh, system, radiosity, params, &|_, _| {})
+}
+
+/// [`compose_gathered`], telling `progress(done, total)` how many rows of the atlas's pages
+/// are gathered (from any thread, in any order; the last call has `done == total`).
+pub fn compose_gathered_with_progress(
+    scene: &Scene,
+    atlas: &Atlas,
+    mesh: &Mesh,
+    system: &System,
+    radiosity: &[Rgb],
+    params: GatherParams,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> LightMap {
     let masks = crate::input::masks(&crate::input::static_scene(scene));
     let bvh = crate::input::visibility(mesh, masks.as_ref());
     let lights = TexelLights::new(scene, atlas, mesh, bvh);
@@ -292,6 +306,8 @@ pub fn compose_gathered(
     let s = stride as i64;
     // A twentieth of a texel, in the mesh's frame.
     let nudge = 0.05 / atlas.density / mesh.frame.scale;
+    let rows_done = std::sync::atomic::AtomicUsize::new(0);
+    let rows_total = height * atlas.pages as usize;
     for (page, texels) in texels.chunks_exact_mut(size.max(1)).enumerate() {
         let owners = atlas.owners(scene, page as u32);
         if owners.len() != texels.len() {
@@ -317,7 +333,7 @@ pub fn compose_gathered(
         // Pass 1, per texel: the exact part (the lights' and the emitters' direct light) into
         // the map, whether it is open, and on the stride's lattice the rays' part (NaN
         // elsewhere): 13 bytes a texel.
-        let mut rays = vec![[f32::NAN; 3]; size];
+        let mut rays = vec![[f32::NAN; 4]; size];
         let mut open = vec![false; size];
         let mut buried = vec![false; size];
         texels
@@ -349,9 +365,12 @@ pub fn compose_gathered(
                     let emitted = gather.emitted(p, n, key);
                     trow[x] = std::array::from_fn(|c| (s.direct[c] + emitted[c]) as f32);
                     if x % stride == 0 && y % stride == 0 {
-                        rrow[x] = gather.reflected(p, n, key).map(|g| g as f32);
+                        let (g, reach) = gather.reflected(p, n, key);
+                        rrow[x] = [g[0] as f32, g[1] as f32, g[2] as f32, reach as f32];
                     }
                 }
+                let done = rows_done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                progress(done, rows_total);
             });
         // Where a texel lies and faces, in the mesh's frame, and its surface.
         let place = |k: usize| -> Option<(DVec3, DVec3, u32)> {
@@ -394,7 +413,11 @@ pub fn compose_gathered(
                             }
                             let same = j == k
                                 || place(j).is_some_and(|(pj, nj, sj)| {
-                                    sj == sk && pj.distance(pk) <= reach && nj.dot(nk) >= SAME_PLANE
+                                    let d = pj.distance(pk);
+                                    sj == sk
+                                        && d <= reach
+                                        && d <= VALID * f64::from(rays[j][3])
+                                        && nj.dot(nk) >= SAME_PLANE
                                 });
                             if same {
                                 for c in 0..3 {
@@ -410,7 +433,7 @@ pub fn compose_gathered(
                         let o = owners[k];
                         let s = lights.sample(o.triangle as usize, o.u, o.v);
                         match s.at.and_then(|at| point(k, at)) {
-                            Some((p, n, key)) => gather.reflected(p, n, key),
+                            Some((p, n, key)) => gather.reflected(p, n, key).0,
                             None => [0.0; 3],
                         }
                     };

@@ -153,3 +153,130 @@ fn a_gather_is_the_same_on_one_and_two_threads() {
     );
     assert!(other.texels != one.texels);
 }
+
+/// A room lit by a ceiling panel, with a box standing on its floor or lifted 1 mm: the floor
+/// farther than 2 cm from the box's foot gets the same light either way (within 1 % in bands
+/// of distance, 5 % at any texel: the rays' noise), as a path tracer would give (1 mm lets
+/// almost nothing under the box). The smooth field of the elements, which spans the foot, is
+/// printed beside it.
+#[test]
+fn a_box_standing_or_lifted_a_millimetre_lights_the_floor_the_same() {
+    use radiant_radiosity::scenes::quad;
+    use radiant_radiosity::texel_light::compose_lightmap;
+    use radiant_scene::atlas::texel_position;
+    let (lo, hi) = (DVec3::new(0.8, 0.0, 0.8), DVec3::new(1.2, 0.4, 1.2));
+    let room = |lift: f64| {
+        let mut scene = Scene::default();
+        let floor = quad(DVec3::ZERO, DVec3::Z * 2.0, DVec3::X * 2.0);
+        add_surface(&mut scene, "floor", [0.6; 3], [0.0; 3], &floor);
+        let mut walls = box_triangles(DVec3::ZERO, DVec3::new(2.0, 1.5, 2.0), true);
+        // The room's own floor is the surface above.
+        walls.retain(|t| t.iter().any(|v| v.y > 0.0));
+        add_surface(&mut scene, "walls", [0.5; 3], [0.0; 3], &walls);
+        let panel = quad(DVec3::new(0.7, 1.499, 0.7), DVec3::X * 0.6, DVec3::Z * 0.6);
+        add_surface(&mut scene, "panel", [0.0; 3], [4.0; 3], &panel);
+        let up = DVec3::Y * lift;
+        add_surface(
+            &mut scene,
+            "box",
+            [0.5; 3],
+            [0.0; 3],
+            &box_triangles(lo + up, hi + up, false),
+        );
+        scene
+    };
+    let floor_light = |scene: &Scene, gathered: bool| -> Vec<(f64, f32)> {
+        let r = common::bake(scene, &BakeParams::default());
+        let atlas = Atlas::new(scene, Some(64.0)).expect("atlas");
+        let map = if gathered {
+            let params = GatherParams {
+                strata: 8,
+                ..GatherParams::default()
+            };
+            compose_gathered(scene, &atlas, &r.mesh, &r.system, &r.radiosity, params)
+        } else {
+            compose_lightmap(scene, &atlas, &r.mesh, &r.system, &r.radiosity)
+        };
+        let size = (atlas.width * atlas.height) as usize;
+        let mut out = Vec::new();
+        for page in 0..atlas.pages {
+            for (k, o) in atlas.owners(scene, page).iter().enumerate() {
+                let Some(t) = scene.triangles.get(o.triangle as usize) else {
+                    continue;
+                };
+                if scene.surfaces[t.surface as usize].name != "floor" {
+                    continue;
+                }
+                let p = texel_position(t.vertices, o.u, o.v);
+                // Distance to the box's foot (0 inside it).
+                let d = (DVec3::new(lo.x - p.x, 0.0, lo.z - p.z).max(DVec3::ZERO)
+                    + DVec3::new(p.x - hi.x, 0.0, p.z - hi.z).max(DVec3::ZERO))
+                .length();
+                let inside = p.x > lo.x && p.x < hi.x && p.z > lo.z && p.z < hi.z;
+                if !inside {
+                    out.push((d, map.texels[page as usize * size + k][1]));
+                }
+            }
+        }
+        out
+    };
+    for gathered in [false, true] {
+        let (standing, lifted) = (
+            floor_light(&room(0.0), gathered),
+            floor_light(&room(1e-3), gathered),
+        );
+        assert_eq!(standing.len(), lifted.len());
+        let mut worst = (0.0f64, 0.0f64);
+        for (s, l) in standing.iter().zip(&lifted) {
+            assert!((s.0 - l.0).abs() < 1e-9);
+            if s.0 > 0.02 {
+                let rel = f64::from((s.1 - l.1).abs() / l.1.max(1e-6));
+                if rel > worst.0 {
+                    worst = (rel, s.0);
+                }
+            }
+        }
+        let mut bands = Vec::new();
+        for (a, b) in [
+            (0.02, 0.05),
+            (0.05, 0.1),
+            (0.1, 0.2),
+            (0.2, 0.5),
+            (0.5, 2.0),
+        ] {
+            let mean = |v: &[(f64, f32)]| {
+                let x: Vec<f64> = (v.iter())
+                    .filter(|t| t.0 > a && t.0 <= b)
+                    .map(|t| f64::from(t.1))
+                    .collect();
+                x.iter().sum::<f64>() / x.len() as f64
+            };
+            bands.push((a, b, mean(&standing) / mean(&lifted) - 1.0));
+        }
+        eprintln!("{bands:?}");
+        eprintln!(
+            "{}: worst {:.2} % at {:.3} m from the foot",
+            if gathered { "gathered" } else { "smooth field" },
+            worst.0 * 100.0,
+            worst.1
+        );
+        // Measured: the smooth field +8.7 % at 2-5 cm, 19 % at worst; the gather within
+        // 0.4 % in every band, 3.2 % at worst (the rays' noise: the two rooms average other
+        // texels near the box).
+        if gathered {
+            for &(a, b, d) in &bands {
+                assert!(
+                    d.abs() < 0.01,
+                    "{a}-{b} m from the foot: {:+.2} %",
+                    d * 100.0
+                );
+            }
+            assert!(
+                worst.0 < 0.05,
+                "{:.2} % at {:.3} m",
+                worst.0 * 100.0,
+                worst.1
+            );
+        }
+    }
+}
