@@ -384,7 +384,8 @@ pub fn compose_gathered_with_progress(
         // not one packed beside it.
         let reach = (r as f64 + 1.0) * std::f64::consts::SQRT_2 / atlas.density / mesh.frame.scale;
         // Pass 2: each open texel adds the mean of the rays' parts gathered on its surface
-        // within the window; one with none (a chart of a few texels) gathers its own.
+        // within the window that stand for it; with none that does, the one nearest to it (in
+        // shares of their reach); with none at all (a chart of a few texels), its own.
         texels
             .par_chunks_mut(width)
             .enumerate()
@@ -398,6 +399,7 @@ pub fn compose_gathered_with_progress(
                         continue;
                     };
                     let (mut sum, mut count) = ([0.0f64; 3], 0.0);
+                    let mut nearest: Option<(f64, usize)> = None;
                     // The lattice's texels in the window: the first multiple of the stride at
                     // or after its corner, then every stride-th.
                     let first = |c: usize| {
@@ -411,24 +413,36 @@ pub fn compose_gathered_with_progress(
                             if rays[j][0].is_nan() {
                                 continue;
                             }
-                            let same = j == k
-                                || place(j).is_some_and(|(pj, nj, sj)| {
+                            // Its distance over its rays' reach, on the same surface and
+                            // plane within the window.
+                            let share = if j == k {
+                                Some(0.0)
+                            } else {
+                                place(j).and_then(|(pj, nj, sj)| {
                                     let d = pj.distance(pk);
-                                    sj == sk
-                                        && d <= reach
-                                        && d <= VALID * f64::from(rays[j][3])
-                                        && nj.dot(nk) >= SAME_PLANE
-                                });
-                            if same {
+                                    (sj == sk && d <= reach && nj.dot(nk) >= SAME_PLANE)
+                                        .then(|| d / f64::from(rays[j][3]).max(1e-12))
+                                })
+                            };
+                            let Some(share) = share else {
+                                continue;
+                            };
+                            if share <= VALID {
                                 for c in 0..3 {
                                     sum[c] += f64::from(rays[j][c]);
                                 }
                                 count += 1.0;
+                            } else if nearest.is_none_or(|(q, _)| share < q) {
+                                nearest = Some((share, j));
                             }
                         }
                     }
                     let mean = if count > 0.0 {
                         sum.map(|v| v / count)
+                    } else if let Some((_, j)) = nearest {
+                        // None stands for it: the one that comes nearest (bounded work where
+                        // geometry crowds a sparse lattice).
+                        std::array::from_fn(|c| f64::from(rays[j][c]))
                     } else {
                         let o = owners[k];
                         let s = lights.sample(o.triangle as usize, o.u, o.v);
