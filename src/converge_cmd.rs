@@ -55,6 +55,9 @@ pub fn run(args: &ConvergeArgs) -> anyhow::Result<()> {
         |(n, _)| n.clone(),
     );
     let time_limit = args.solve.time_limit.unwrap_or(10.0);
+    if !args.light_maps.is_empty() {
+        return lightmap_curve(args, &scene, &source, file_ref.as_ref());
+    }
     if clustered {
         let Some((_, rows)) = &file_ref else {
             anyhow::bail!(
@@ -474,4 +477,143 @@ fn clustered_curves(
     }
     let title = format!("{source}: mean relative error vs bake time (reference: {reference_name})");
     write_outputs(args, &csv, &curves, &title, reference_name)
+}
+
+/// `--light-maps`: one bake as `bake` makes it (Jacobi, analytic form factors, the hierarchy
+/// `bake` would take), then its light map composed at each setting, timed, and measured over
+/// the surfaces (what the renderer shows, `texel_light::shown_surface_means`) against the
+/// reference and at the points against theirs: error against time for the light map alone, so
+/// that a user picks a final-gather setting from the curve.
+fn lightmap_curve(
+    args: &ConvergeArgs,
+    scene: &radiant::scene::Scene,
+    source: &str,
+    reference: Option<&NamedReference>,
+) -> anyhow::Result<()> {
+    use radiant::radiosity::cluster::ClusterParams;
+    use radiant::radiosity::final_gather::GatherParams;
+    use radiant::radiosity::texel_light;
+    use radiant::scene::atlas::{Atlas, MAX_SIDE};
+    anyhow::ensure!(
+        args.light_maps.iter().all(|&s| s <= 64),
+        "--light-maps: each setting is a number of strata, 0 (the smooth field) to 64"
+    );
+    let asked = match &args.points {
+        Some(p) => Some(crate::points::read(
+            scene,
+            p,
+            args.reference_points.as_deref(),
+        )?),
+        None => None,
+    };
+    let params = args
+        .solve
+        .params(SolverKind::Jacobi, FormFactorKind::Analytic)?;
+    let hierarchy = crate::HierarchyArgs {
+        hierarchy: args.hierarchy,
+        memory_limit: args.memory_limit,
+        link_samples: ClusterParams::default().samples,
+    };
+    let t = Instant::now();
+    let result = if crate::baking::use_clustered(args.hierarchy, scene, &params)? {
+        crate::baking::bake_clustered(scene, &params, &hierarchy, None, None)?.0
+    } else {
+        crate::baking::bake_triangles(scene, &params, None)?
+    };
+    let bake_s = t.elapsed().as_secs_f64();
+    let atlas = Atlas::paged(scene, None, MAX_SIDE)?;
+    println!(
+        "baked in {bake_s:.2} s; light map {}×{}×{} texels",
+        atlas.width, atlas.height, atlas.pages
+    );
+    let mut csv = String::from(
+        "light_map,strata,bake_s,lightmap_s,t_s,surfaces_mean_rel_error,surfaces_max_rel_error,points_median_rel_error,points_mean_rel_error,points_max_rel_error\n",
+    );
+    let (mut by_surfaces, mut by_points) = (Vec::new(), Vec::new());
+    for &strata in &args.light_maps {
+        let t = Instant::now();
+        let map = match strata {
+            0 => texel_light::compose_lightmap(
+                scene,
+                &atlas,
+                &result.mesh,
+                &result.system,
+                &result.radiosity,
+            ),
+            _ => texel_light::compose_gathered(
+                scene,
+                &atlas,
+                &result.mesh,
+                &result.system,
+                &result.radiosity,
+                GatherParams {
+                    strata,
+                    seed: params.ff.seed,
+                    ..GatherParams::default()
+                },
+            ),
+        };
+        let lightmap_s = t.elapsed().as_secs_f64();
+        let t_s = bake_s + lightmap_s;
+        let surfaces = match reference {
+            Some((_, rows)) => {
+                let means = texel_light::shown_surface_means(scene, &atlas, &result.mesh, &map)?;
+                Some(metrics::compare_surfaces(&means, rows)?)
+            }
+            None => None,
+        };
+        let points = match &asked {
+            Some(a) => crate::points::measure(a, scene, &atlas, &map)?,
+            None => None,
+        };
+        let name = if strata == 0 { "smooth" } else { "gather" };
+        let f = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6e}"));
+        let _ = writeln!(
+            csv,
+            "{name},{strata},{bake_s:.6},{lightmap_s:.6},{t_s:.6},{},{},{},{},{}",
+            f(surfaces.map(|e| e.mean_rel)),
+            f(surfaces.map(|e| e.max_rel)),
+            f(points.as_ref().map(|c| c.median_rel)),
+            f(points.as_ref().map(|c| c.mean_rel)),
+            f(points.as_ref().map(|c| c.max_rel)),
+        );
+        let pct = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{:.2} %", v * 100.0));
+        println!(
+            "{name} {strata:>2}: light map {lightmap_s:>7.2} s (bake + map {t_s:>7.2} s); surfaces mean {}; points median {}, mean {}, worst {}",
+            pct(surfaces.map(|e| e.mean_rel)),
+            pct(points.as_ref().map(|c| c.median_rel)),
+            pct(points.as_ref().map(|c| c.mean_rel)),
+            pct(points.as_ref().map(|c| c.max_rel)),
+        );
+        if let Some(e) = surfaces {
+            by_surfaces.push((t_s, e.mean_rel));
+        }
+        if let Some(c) = &points {
+            by_points.push((t_s, c.mean_rel));
+        }
+    }
+    write_atomic(&args.out.join("lightmap_convergence.csv"), csv.as_bytes())?;
+    let mut curves = Vec::new();
+    for (label, points) in [
+        ("surfaces (mean)", by_surfaces),
+        ("points (mean)", by_points),
+    ] {
+        if !points.is_empty() {
+            curves.push(Curve {
+                label: label.to_string(),
+                points,
+            });
+        }
+    }
+    let title =
+        format!("{source}: the light map's error vs bake and light-map time, by final gather");
+    write_atomic(
+        &args.out.join("lightmap_convergence.png"),
+        &plot_convergence(&curves, &title)?,
+    )?;
+    println!(
+        "wrote {}/lightmap_convergence.csv and lightmap_convergence.png",
+        args.out.display()
+    );
+    Ok(())
 }

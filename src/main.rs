@@ -272,6 +272,19 @@ pub(crate) struct ConvergeArgs {
     /// Seconds between error samples.
     #[arg(long, default_value_t = 0.01)]
     pub(crate) sample_every: f64,
+    /// Light maps to measure instead of solvers: one bake (as `bake` does it), then its light
+    /// map composed at each of these final-gather settings (STRATA, as `bake --final-gather`;
+    /// 0: the smooth field), each measured over the surfaces against the reference and at
+    /// --points against --reference-points: lightmap_convergence.csv and .png.
+    #[arg(long, value_delimiter = ',', value_name = "STRATA,...")]
+    pub(crate) light_maps: Vec<u32>,
+    /// With --light-maps: surface points (as `bake --points`).
+    #[arg(long, value_name = "FILE.csv", requires = "light_maps")]
+    pub(crate) points: Option<PathBuf>,
+    /// With --light-maps and --points: the path-traced values there (as `bake
+    /// --reference-points`).
+    #[arg(long, value_name = "REF.csv", requires = "points")]
+    pub(crate) reference_points: Option<PathBuf>,
     #[command(flatten)]
     pub(crate) solve: SolveArgs,
 }

@@ -88,21 +88,7 @@ pub(crate) fn write(
         &out.join("points.csv"),
         points_csv(&asked.points, &values).as_bytes(),
     )?;
-    let comparison = match &asked.reference {
-        None => None,
-        Some((name, rows)) => {
-            let ours: Vec<PointReference> = rows
-                .iter()
-                .filter(|r| asked.points.iter().any(|p| p.name == r.name))
-                .cloned()
-                .collect();
-            let c = metrics::compare_points_with(&ours, None, |r| {
-                let k = asked.points.iter().position(|p| p.name == r.name)?;
-                Some(values[k].l)
-            })?;
-            Some((name.clone(), c))
-        }
-    };
+    let comparison = compare(asked, &values)?;
     let mut json = json!({ "file": asked.file, "count": values.len(), "written": "points.csv" });
     if let Some((name, c)) = &comparison {
         let per_point: Vec<serde_json::Value> = c
@@ -120,6 +106,38 @@ pub(crate) fn write(
         });
     }
     Ok(PointsResult { comparison, json })
+}
+
+/// The points' `values` against the reference, where one was given.
+fn compare(
+    asked: &AskedPoints,
+    values: &[ShownPoint],
+) -> anyhow::Result<Option<(String, PointComparison)>> {
+    let Some((name, rows)) = &asked.reference else {
+        return Ok(None);
+    };
+    let ours: Vec<PointReference> = rows
+        .iter()
+        .filter(|r| asked.points.iter().any(|p| p.name == r.name))
+        .cloned()
+        .collect();
+    let c = metrics::compare_points_with(&ours, None, |r| {
+        let k = asked.points.iter().position(|p| p.name == r.name)?;
+        Some(values[k].l)
+    })?;
+    Ok(Some((name.clone(), c)))
+}
+
+/// What the renderer shows of `map` at the points, against the reference (`None` without one):
+/// `radiant converge --light-maps`.
+pub(crate) fn measure(
+    asked: &AskedPoints,
+    scene: &Scene,
+    atlas: &Atlas,
+    map: &LightMap,
+) -> anyhow::Result<Option<PointComparison>> {
+    let values = shown::shown_at(scene, atlas, map, &asked.located)?;
+    Ok(compare(asked, &values)?.map(|(_, c)| c))
 }
 
 impl PointsResult {

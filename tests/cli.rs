@@ -992,3 +992,43 @@ fn bake_final_gather_is_reported_and_bad_settings_are_refused() {
         assert!(stderr.contains(bad[0]), "{bad:?}: {stderr}");
     }
 }
+
+/// `converge --light-maps`: one bake, its light map composed at each final-gather setting and
+/// measured over the surfaces and at the points, against time.
+#[test]
+fn converge_measures_light_maps_against_time() {
+    let out = tmp("converge-light-maps");
+    let points = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("assets/reference/cornell_points_rgb_mitsuba.csv");
+    let points = points.display().to_string();
+    let stdout = run_ok(
+        &[
+            "converge",
+            "--builtin",
+            "cornell-box",
+            "--light-maps",
+            "0,2",
+            "--points",
+            &points,
+            "--reference-points",
+            &points,
+        ],
+        &out,
+    );
+    assert!(stdout.contains("gather  2"), "{stdout}");
+    let csv = std::fs::read_to_string(out.join("lightmap_convergence.csv")).expect("csv");
+    let rows: Vec<Vec<&str>> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect())
+        .collect();
+    assert_eq!(rows.len(), 2, "{csv}");
+    assert_eq!((rows[0][0], rows[1][0]), ("smooth", "gather"));
+    for r in &rows {
+        let t: f64 = r[4].parse().expect("t_s");
+        let surfaces: f64 = r[5].parse().expect("surfaces' error");
+        let points: f64 = r[8].parse().expect("points' error");
+        assert!(t > 0.0 && surfaces < 0.02 && points < 0.2, "{r:?}");
+    }
+    assert!(out.join("lightmap_convergence.png").is_file());
+}
