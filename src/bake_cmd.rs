@@ -414,6 +414,7 @@ fn write_outputs(args: &BakeArgs, job: &Job, result: &BakeResult) -> anyhow::Res
                         seed: job.params.ff.seed,
                         stride: args.gather_stride,
                         filter_radius: args.gather_radius.max(args.gather_stride),
+                        element_passes: args.gather_passes,
                         ..Default::default()
                     },
                     &progress,
@@ -555,6 +556,7 @@ fn report_json(
                     "rays_per_gather": strata * strata,
                     "stride": args.gather_stride,
                     "radius": args.gather_radius.max(args.gather_stride),
+                    "element_passes": args.gather_passes,
                     "emitter_samples": radiant::radiosity::final_gather::GatherParams::default().emitter_samples,
                 }),
             },

@@ -195,6 +195,12 @@ pub(crate) struct BakeArgs {
     #[arg(long, value_name = "TEXELS", default_value_t = GatherParams::default().filter_radius,
           value_parser = clap::value_parser!(u32).range(0..=16))]
     pub(crate) gather_radius: u32,
+    /// With --final-gather: passes of a gather at the elements first (each element's light
+    /// from rays at its own points into the last pass's solution), which the texels then
+    /// gather from (0: the solve's light).
+    #[arg(long, value_name = "N", default_value_t = 0,
+          value_parser = clap::value_parser!(u32).range(0..=8))]
+    pub(crate) gather_passes: u32,
     #[command(flatten)]
     pub(crate) hierarchy: HierarchyArgs,
     #[command(flatten)]

@@ -64,6 +64,10 @@ pub struct GatherParams {
     /// texel) and the filter spreads them to the others; a texel with no such neighbour on its
     /// surface (a chart of a few texels) shoots its own.
     pub stride: u32,
+    /// Gathers at the elements before the texels' ([`regather_elements`]): each pass gives
+    /// every element the light its own points gather from the last pass's solution (0: the
+    /// solve's light as it is).
+    pub element_passes: u32,
 }
 
 impl Default for GatherParams {
@@ -75,6 +79,7 @@ impl Default for GatherParams {
             seed: 1,
             filter_radius: 2,
             stride: 2,
+            element_passes: 0,
         }
     }
 }
@@ -353,6 +358,89 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
         }
         sum.map(|s| s / f64::from(m))
     }
+}
+
+impl<V: Visibility> FinalGather<'_, V> {
+    /// Whether `x` (normal `n`) lies inside or under other geometry: the first face a ray along
+    /// its normal meets is the back of a single-sided one (as `texel_light` finds it).
+    fn buried(&self, x: DVec3, n: DVec3) -> bool {
+        self.vis
+            .closest_hit((x + n * 1e-5).as_vec3(), n.as_vec3(), 4.0)
+            .is_some_and(|h| {
+                !h.front
+                    && !self
+                        .double_sided
+                        .get(h.triangle as usize)
+                        .copied()
+                        .unwrap_or(false)
+            })
+    }
+}
+
+/// A final gather at the elements: `passes` times, every element of `mesh` (with reflectance
+/// and not enclosed) takes `B = E + ρ H`, `H` the punctual lights' direct part the bake gave
+/// it (one ray from its centroid per light) plus the mean of what [`FinalGather::gather`]
+/// finds at the open ones of its four quarter centroids in the last pass's solution (the
+/// first: `radiosity`). The solve's sources carry the error of elements that span what
+/// covers part of them; gathered at their own points they pass on what those points receive.
+pub fn regather_elements<V: Visibility>(
+    scene: &Scene,
+    mesh: &Mesh,
+    system: &crate::system::System,
+    radiosity: &[Rgb],
+    vis: &V,
+    params: GatherParams,
+    passes: u32,
+) -> Vec<Rgb> {
+    use rayon::prelude::*;
+    let lights: Vec<radiant_scene::Light> = (scene.lights.iter())
+        .filter(|l| l.intensity > 0.0)
+        .cloned()
+        .collect();
+    let direct = if lights.is_empty() {
+        Vec::new()
+    } else {
+        crate::lights::direct_irradiance(mesh, &lights, vis)
+    };
+    let emission = crate::smooth::element_emission(mesh, &scene.surfaces);
+    let mut b = radiosity.to_vec();
+    for pass in 0..passes {
+        let field = SmoothField::new(mesh, system, &scene.surfaces, &b);
+        let g = FinalGather::new(scene, mesh, &field, vis, params);
+        b = (0..mesh.leaves.len())
+            .into_par_iter()
+            .map(|i| {
+                let old = b.get(i).copied().unwrap_or([0.0; 3]);
+                let rho = system.rho.get(i).copied().unwrap_or([0.0; 3]);
+                if rho.iter().all(|&r| r <= 0.0) || system.weight.get(i).is_some_and(|&w| w <= 0.0)
+                {
+                    return old;
+                }
+                let node = mesh.leaf_node(i as u32);
+                let (v, n) = (node.v, node.normal);
+                let (mut h, mut k) = ([0.0; 3], 0.0);
+                for (j, (b1, b2)) in crate::points::lattice(2).enumerate() {
+                    let x = v[0] * (1.0 - b1 - b2) + v[1] * b1 + v[2] * b2;
+                    if g.buried(x, n) {
+                        continue;
+                    }
+                    let key = hash(i as u64, u64::from(pass), j as u64 + 0x656c);
+                    let got = g.gather(x, n, key);
+                    for c in 0..3 {
+                        h[c] += got[c];
+                    }
+                    k += 1.0;
+                }
+                if k == 0.0 {
+                    return old;
+                }
+                let d = direct.get(i).copied().unwrap_or([0.0; 3]);
+                let e = emission.get(i).copied().unwrap_or([0.0; 3]);
+                std::array::from_fn(|c| e[c] + rho[c] * (h[c] / k + d[c] / std::f64::consts::PI))
+            })
+            .collect();
+    }
+    b
 }
 
 /// Two unit tangents completing unit `n` to an orthonormal basis (Duff et al. 2017).

@@ -296,6 +296,22 @@ pub fn compose_gathered_with_progress(
     let masks = crate::input::masks(&crate::input::static_scene(scene));
     let bvh = crate::input::visibility(mesh, masks.as_ref());
     let lights = TexelLights::new(scene, atlas, mesh, bvh);
+    let regathered;
+    let radiosity = match params.element_passes {
+        0 => radiosity,
+        passes => {
+            regathered = crate::final_gather::regather_elements(
+                scene,
+                mesh,
+                system,
+                radiosity,
+                &lights.vis,
+                params,
+                passes,
+            );
+            &regathered[..]
+        }
+    };
     let field = SmoothField::new(mesh, system, &scene.surfaces, radiosity);
     let gather = FinalGather::new(scene, mesh, &field, &lights.vis, params);
     let (width, height) = (atlas.width.max(1) as usize, atlas.height as usize);

@@ -39,6 +39,26 @@ fn a_furnace_gathers_its_closed_form_at_every_texel() {
     add_surface(&mut scene, "furnace", [0.5; 3], [1.0; 3], &walls);
     let r = common::bake(&scene, &BakeParams::default());
     let atlas = Atlas::new(&scene, Some(32.0)).expect("atlas");
+    // The furnace's solution is the fixed point of a gather at the elements: passes of it
+    // leave every element at B = 2.
+    let vis = radiant_radiosity::input::visibility(&r.mesh, None);
+    let passes = radiant_radiosity::final_gather::regather_elements(
+        &scene,
+        &r.mesh,
+        &r.system,
+        &r.radiosity,
+        &vis,
+        GatherParams {
+            strata: 4,
+            ..GatherParams::default()
+        },
+        2,
+    );
+    for b in &passes {
+        for &c in b {
+            assert!((c - 2.0).abs() < 0.02, "B {c} after two passes, not 2");
+        }
+    }
     for analytic_emitters in [64, 0] {
         let mean_tolerance = if analytic_emitters == 0 { 0.1 } else { 0.02 };
         // Exact form factors, then points sampled on the emitters by power: unbiased, but a
