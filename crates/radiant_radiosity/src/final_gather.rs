@@ -37,7 +37,7 @@ pub const VALID: f64 = 0.5;
 
 /// In a penumbra (an emitter's parts partly hidden), its shadow rays go to parts this many
 /// times finer along each edge.
-pub const PENUMBRA: u32 = 4;
+pub const PENUMBRA: u32 = 2;
 
 /// How a final gather samples a texel.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
