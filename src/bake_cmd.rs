@@ -409,14 +409,7 @@ fn write_outputs(args: &BakeArgs, job: &Job, result: &BakeResult) -> anyhow::Res
                     &result.mesh,
                     &result.system,
                     &result.radiosity,
-                    radiant::radiosity::final_gather::GatherParams {
-                        strata,
-                        seed: job.params.ff.seed,
-                        stride: args.gather_stride,
-                        filter_radius: args.gather_radius.max(args.gather_stride),
-                        element_passes: args.gather_passes,
-                        ..Default::default()
-                    },
+                    args.gather.params(strata, job.params.ff.seed),
                     &progress,
                 );
                 pb.finish_and_clear();
@@ -551,14 +544,17 @@ fn report_json(
             "seconds": w.lightmap_s,
             "final_gather": match args.final_gather {
                 0 => serde_json::Value::Null,
-                strata => json!({
-                    "strata": strata,
-                    "rays_per_gather": strata * strata,
-                    "stride": args.gather_stride,
-                    "radius": args.gather_radius.max(args.gather_stride),
-                    "element_passes": args.gather_passes,
-                    "emitter_samples": radiant::radiosity::final_gather::GatherParams::default().emitter_samples,
-                }),
+                strata => {
+                    let g = args.gather.params(strata, params.ff.seed);
+                    json!({
+                        "strata": g.strata,
+                        "rays_per_gather": g.strata * g.strata,
+                        "stride": g.stride,
+                        "radius": g.filter_radius,
+                        "element_passes": g.element_passes,
+                        "emitter_samples": g.emitter_samples,
+                    })
+                }
             },
             "write_seconds": w.write_s,
         },

@@ -491,7 +491,6 @@ fn lightmap_curve(
     reference: Option<&NamedReference>,
 ) -> anyhow::Result<()> {
     use radiant::radiosity::cluster::ClusterParams;
-    use radiant::radiosity::final_gather::GatherParams;
     use radiant::radiosity::texel_light;
     use radiant::scene::atlas::{Atlas, MAX_SIDE};
     anyhow::ensure!(
@@ -527,10 +526,11 @@ fn lightmap_curve(
         atlas.width, atlas.height, atlas.pages
     );
     let mut csv = String::from(
-        "light_map,strata,bake_s,lightmap_s,t_s,surfaces_mean_rel_error,surfaces_max_rel_error,points_median_rel_error,points_mean_rel_error,points_max_rel_error\n",
+        "light_map,strata,stride,radius,element_passes,bake_s,lightmap_s,t_s,surfaces_mean_rel_error,surfaces_max_rel_error,points_median_rel_error,points_mean_rel_error,points_max_rel_error\n",
     );
     let (mut by_surfaces, mut by_points) = (Vec::new(), Vec::new());
     for &strata in &args.light_maps {
+        let g = args.gather.params(strata, params.ff.seed);
         let t = Instant::now();
         let map = match strata {
             0 => texel_light::compose_lightmap(
@@ -546,11 +546,7 @@ fn lightmap_curve(
                 &result.mesh,
                 &result.system,
                 &result.radiosity,
-                GatherParams {
-                    strata,
-                    seed: params.ff.seed,
-                    ..GatherParams::default()
-                },
+                g,
             ),
         };
         let lightmap_s = t.elapsed().as_secs_f64();
@@ -570,7 +566,10 @@ fn lightmap_curve(
         let f = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6e}"));
         let _ = writeln!(
             csv,
-            "{name},{strata},{bake_s:.6},{lightmap_s:.6},{t_s:.6},{},{},{},{},{}",
+            "{name},{strata},{},{},{},{bake_s:.6},{lightmap_s:.6},{t_s:.6},{},{},{},{},{}",
+            g.stride,
+            g.filter_radius,
+            g.element_passes,
             f(surfaces.map(|e| e.mean_rel)),
             f(surfaces.map(|e| e.max_rel)),
             f(points.as_ref().map(|c| c.median_rel)),

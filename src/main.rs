@@ -185,26 +185,48 @@ pub(crate) struct BakeArgs {
     #[arg(long, value_name = "STRATA", default_value_t = 0,
           value_parser = clap::value_parser!(u32).range(0..=64))]
     pub(crate) final_gather: u32,
-    /// With --final-gather: rays are shot at every N-th texel along each axis, and each texel
+    #[command(flatten)]
+    pub(crate) gather: GatherArgs,
+    #[command(flatten)]
+    pub(crate) hierarchy: HierarchyArgs,
+    #[command(flatten)]
+    pub(crate) solve: SolveArgs,
+}
+
+/// How a final gather samples (`bake --final-gather`, `converge --light-maps`).
+#[derive(Args, Debug, Clone, Copy)]
+pub(crate) struct GatherArgs {
+    /// With a final gather: rays are shot at every N-th texel along each axis, and each texel
     /// takes the mean of those within --gather-radius on its surface (1: at every texel).
     #[arg(long, value_name = "N", default_value_t = GatherParams::default().stride,
           value_parser = clap::value_parser!(u32).range(1..=16))]
     pub(crate) gather_stride: u32,
-    /// With --final-gather: the radius, in texels, of the window whose gathered rays a texel
+    /// With a final gather: the radius, in texels, of the window whose gathered rays a texel
     /// averages (at least the stride).
     #[arg(long, value_name = "TEXELS", default_value_t = GatherParams::default().filter_radius,
           value_parser = clap::value_parser!(u32).range(0..=16))]
     pub(crate) gather_radius: u32,
-    /// With --final-gather: passes of a gather at the elements first (each element's light
+    /// With a final gather: passes of a gather at the elements first (each element's light
     /// from rays at its own points into the last pass's solution), which the texels then
     /// gather from (0: the solve's light).
     #[arg(long, value_name = "N", default_value_t = 0,
           value_parser = clap::value_parser!(u32).range(0..=8))]
     pub(crate) gather_passes: u32,
-    #[command(flatten)]
-    pub(crate) hierarchy: HierarchyArgs,
-    #[command(flatten)]
-    pub(crate) solve: SolveArgs,
+}
+
+impl GatherArgs {
+    /// The gather's parameters at `strata` (`strata²` rays per gathered texel), seeded by
+    /// `seed`.
+    pub(crate) fn params(&self, strata: u32, seed: u64) -> GatherParams {
+        GatherParams {
+            strata,
+            seed,
+            stride: self.gather_stride,
+            filter_radius: self.gather_radius.max(self.gather_stride),
+            element_passes: self.gather_passes,
+            ..GatherParams::default()
+        }
+    }
 }
 
 /// Which link hierarchy bakes, and its memory budget.
@@ -291,6 +313,8 @@ pub(crate) struct ConvergeArgs {
     /// --reference-points`).
     #[arg(long, value_name = "REF.csv", requires = "points")]
     pub(crate) reference_points: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) gather: GatherArgs,
     #[command(flatten)]
     pub(crate) solve: SolveArgs,
 }

@@ -1013,6 +1013,8 @@ fn converge_measures_light_maps_against_time() {
             &points,
             "--reference-points",
             &points,
+            "--gather-stride",
+            "1",
         ],
         &out,
     );
@@ -1025,10 +1027,12 @@ fn converge_measures_light_maps_against_time() {
         .collect();
     assert_eq!(rows.len(), 2, "{csv}");
     assert_eq!((rows[0][0], rows[1][0]), ("smooth", "gather"));
+    // strata, stride, radius (at least the stride), element passes.
+    assert_eq!(&rows[1][1..5], &["2", "1", "2", "0"]);
     for r in &rows {
-        let t: f64 = r[4].parse().expect("t_s");
-        let surfaces: f64 = r[5].parse().expect("surfaces' error");
-        let points: f64 = r[8].parse().expect("points' error");
+        let t: f64 = r[7].parse().expect("t_s");
+        let surfaces: f64 = r[8].parse().expect("surfaces' error");
+        let points: f64 = r[11].parse().expect("points' error");
         assert!(t > 0.0 && surfaces < 0.02 && points < 0.2, "{r:?}");
     }
     assert!(out.join("lightmap_convergence.png").is_file());
