@@ -24,6 +24,26 @@ fn font() -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Tick values of a log axis over `[lo, hi]`: 1, 2 and 5 times the powers of ten inside it,
+/// so that a range within one decade (a light-map curve: 1.3 to 4.7 s) is labelled too.
+fn ticks(lo: f64, hi: f64) -> Vec<f64> {
+    if !(lo > 0.0 && hi > lo && hi.is_finite()) {
+        return Vec::new();
+    }
+    let mut out = Vec::new();
+    let mut decade = 10f64.powi(lo.log10().floor() as i32);
+    while decade <= hi && out.len() < 64 {
+        for m in [1.0, 2.0, 5.0] {
+            let v = decade * m;
+            if v >= lo && v <= hi {
+                out.push(v);
+            }
+        }
+        decade *= 10.0;
+    }
+    out
+}
+
 /// Plots error (log) against seconds (log); returns PNG bytes.
 pub fn plot_convergence(curves: &[Curve], title: &str) -> anyhow::Result<Vec<u8>> {
     font()?;
@@ -53,7 +73,10 @@ pub fn plot_convergence(curves: &[Curve], title: &str) -> anyhow::Result<Vec<u8>
             .margin(12)
             .x_label_area_size(40)
             .y_label_area_size(70)
-            .build_cartesian_2d((t0..t1).log_scale(), (e0..e1).log_scale())
+            .build_cartesian_2d(
+                (t0..t1).log_scale().with_key_points(ticks(t0, t1)),
+                (e0..e1).log_scale().with_key_points(ticks(e0, e1)),
+            )
             .context("plot axes")?;
         chart
             .configure_mesh()
