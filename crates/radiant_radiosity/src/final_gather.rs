@@ -361,19 +361,10 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
 }
 
 impl<V: Visibility> FinalGather<'_, V> {
-    /// Whether `x` (normal `n`) lies inside or under other geometry: the first face a ray along
-    /// its normal meets is the back of a single-sided one (as `texel_light` finds it).
+    /// Whether `x` (normal `n`) lies inside or under other geometry, as the light map's
+    /// texels are tested ([`crate::texel_light`]).
     fn buried(&self, x: DVec3, n: DVec3) -> bool {
-        self.vis
-            .closest_hit((x + n * 1e-5).as_vec3(), n.as_vec3(), 4.0)
-            .is_some_and(|h| {
-                !h.front
-                    && !self
-                        .double_sided
-                        .get(h.triangle as usize)
-                        .copied()
-                        .unwrap_or(false)
-            })
+        crate::texel_light::buried(self.vis, &self.double_sided, x, n)
     }
 }
 

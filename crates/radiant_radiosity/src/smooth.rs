@@ -64,7 +64,7 @@ pub fn exposed_field(
 }
 
 /// Cosine between normals that still share a vertex value.
-const SAME_PLANE: f64 = 0.906; // 25°
+pub(crate) const SAME_PLANE: f64 = 0.906; // 25°
 
 impl SmoothField {
     /// The field of `radiosity` on `mesh`, with the system's reflectance and weights, and the

@@ -128,18 +128,7 @@ impl<V: Visibility> TexelLights<V> {
     /// a ray along its normal meets is the back of a single-sided one (a box standing on a
     /// floor, a wall's foot, a column on its plinth).
     fn buried(&self, x: DVec3, n: DVec3) -> bool {
-        // From just above the surface: a face lying on it (a box's bottom on a floor) is not
-        // met, the box's top from inside is.
-        self.vis
-            .closest_hit((x + n * 1e-5).as_vec3(), n.as_vec3(), 4.0)
-            .is_some_and(|h| {
-                !h.front
-                    && !self
-                        .double_sided
-                        .get(h.triangle as usize)
-                        .copied()
-                        .unwrap_or(false)
-            })
+        buried(&self.vis, &self.double_sided, x, n)
     }
 
     /// Whether the point `x` (world units) of scene triangle `triangle` lies in the open: not
@@ -436,7 +425,9 @@ pub fn compose_gathered_with_progress(
                             } else {
                                 place(j).and_then(|(pj, nj, sj)| {
                                     let d = pj.distance(pk);
-                                    (sj == sk && d <= reach && nj.dot(nk) >= SAME_PLANE)
+                                    (sj == sk
+                                        && d <= reach
+                                        && nj.dot(nk) >= crate::smooth::SAME_PLANE)
                                         .then(|| d / f64::from(rays[j][3]).max(1e-12))
                                 })
                             };
@@ -488,8 +479,21 @@ pub fn compose_gathered_with_progress(
     }
 }
 
-/// Normals that share a filtered gather: within 25°, as the smooth field's vertices.
-const SAME_PLANE: f64 = 0.906;
+/// Whether the point `x` (normal `n`, the frame of `vis`) lies inside or under other
+/// geometry: the first face a ray along its normal meets is the back of a single-sided one
+/// (`double_sided` per triangle of `vis`). From just above the surface: a face lying on it (a
+/// box's bottom on a floor) is not met, the box's top from inside is. The one test of the
+/// light map's texels and of the final gather's points.
+pub(crate) fn buried<V: Visibility>(vis: &V, double_sided: &[bool], x: DVec3, n: DVec3) -> bool {
+    vis.closest_hit((x + n * 1e-5).as_vec3(), n.as_vec3(), 4.0)
+        .is_some_and(|h| {
+            !h.front
+                && !double_sided
+                    .get(h.triangle as usize)
+                    .copied()
+                    .unwrap_or(false)
+        })
+}
 
 /// What the renderer shows of `map` (a light map of `scene` on `atlas`, baked on `mesh`),
 /// averaged over each surface ([`crate::points::surface_means`]), a point buried under other
