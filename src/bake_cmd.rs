@@ -383,39 +383,12 @@ fn write_outputs(args: &BakeArgs, job: &Job, result: &BakeResult) -> anyhow::Res
             )
         });
         let lap = Instant::now();
-        // The punctual lights' direct light per texel, the rest from the smooth field.
-        let map = match args.final_gather {
-            0 => radiant::radiosity::texel_light::compose_lightmap(
-                &job.scene,
-                &job.atlas,
-                &result.mesh,
-                &result.system,
-                &result.radiosity,
-            ),
-            strata => {
-                let pb = crate::common::progress_bar(1, "light map (final gather)");
-                let log = crate::common::ProgressLog::new();
-                let progress = |done: usize, total: usize| {
-                    pb.set_length(total as u64);
-                    pb.set_position(done as u64);
-                    // Also in the log, every few seconds, for runs without a terminal.
-                    if log.due() {
-                        tracing::info!(target: crate::common::PROGRESS, done, total, "final gather progress (rows)");
-                    }
-                };
-                let map = radiant::radiosity::texel_light::compose_gathered_with_progress(
-                    &job.scene,
-                    &job.atlas,
-                    &result.mesh,
-                    &result.system,
-                    &result.radiosity,
-                    args.gather.params(strata, job.params.ff.seed),
-                    &progress,
-                );
-                pb.finish_and_clear();
-                map
-            }
-        };
+        let map = crate::baking::light_map(
+            &job.scene,
+            &job.atlas,
+            result,
+            args.light_map.gather(job.params.ff.seed),
+        );
         let lightmap_s = lap.elapsed().as_secs_f64();
         let lap = Instant::now();
         let light = output::write_lightmaps(out, &map)
@@ -542,20 +515,14 @@ fn report_json(
             "utilisation": atlas.utilisation(),
             "atlas_seconds": job.atlas_s,
             "seconds": w.lightmap_s,
-            "final_gather": match args.final_gather {
-                0 => serde_json::Value::Null,
-                strata => {
-                    let g = args.gather.params(strata, params.ff.seed);
-                    json!({
-                        "strata": g.strata,
-                        "rays_per_gather": g.strata * g.strata,
-                        "stride": g.stride,
-                        "radius": g.filter_radius,
-                        "element_passes": g.element_passes,
-                        "emitter_samples": g.emitter_samples,
-                    })
-                }
-            },
+            "final_gather": args.light_map.gather(params.ff.seed).map(|g| json!({
+                "strata": g.strata,
+                "rays_per_gather": g.strata * g.strata,
+                "stride": g.stride,
+                "radius": g.filter_radius,
+                "element_passes": g.element_passes,
+                "emitter_samples": g.emitter_samples,
+            })),
             "write_seconds": w.write_s,
         },
         "export": w.export,

@@ -217,3 +217,44 @@ pub(crate) fn start_bake(
     pb.set_message("solving");
     Ok((bake, pb))
 }
+
+/// The light map of `result` on `atlas`: the punctual lights' direct light per texel, the rest
+/// from the smooth field, or gathered per texel with `gather` (a final gather: a progress bar,
+/// and the progress in the log every few seconds for runs without a terminal).
+pub(crate) fn light_map(
+    scene: &Scene,
+    atlas: &radiant::scene::atlas::Atlas,
+    result: &BakeResult,
+    gather: Option<radiant::radiosity::final_gather::GatherParams>,
+) -> radiant::radiosity::lightmap::LightMap {
+    use radiant::radiosity::texel_light;
+    let Some(gather) = gather else {
+        return texel_light::compose_lightmap(
+            scene,
+            atlas,
+            &result.mesh,
+            &result.system,
+            &result.radiosity,
+        );
+    };
+    let pb = progress_bar(1, "light map (final gather)");
+    let log = ProgressLog::new();
+    let progress = |done: usize, total: usize| {
+        pb.set_length(total as u64);
+        pb.set_position(done as u64);
+        if log.due() {
+            tracing::info!(target: PROGRESS, done, total, "final gather progress (rows)");
+        }
+    };
+    let map = texel_light::compose_gathered_with_progress(
+        scene,
+        atlas,
+        &result.mesh,
+        &result.system,
+        &result.radiosity,
+        gather,
+        &progress,
+    );
+    pb.finish_and_clear();
+    map
+}

@@ -38,9 +38,11 @@ pub use radiant_scene as scene;
 #[cfg(feature = "render")]
 pub mod bridge {
     use radiant_radiosity::BakeResult;
+    use radiant_radiosity::lightmap::LightMap;
     use radiant_render::RenderError;
     use radiant_render::scene::RenderScene;
     use radiant_scene::Scene;
+    use radiant_scene::atlas::Atlas;
 
     /// The renderer's scene for `scene`, its light map on the scene's atlas at `texel_density`
     /// texels per unit (`None`: automatic), lit by `bake` (or with an empty light map when there
@@ -81,5 +83,21 @@ pub mod bridge {
             &bake.radiosity,
         );
         radiant_ecs::render::set_lightmap(render_scene, scene, &atlas, &map);
+    }
+
+    /// Fills `render_scene`'s light map with the one `compose` makes on the renderer's own
+    /// atlas (`render_scene.atlas`; e.g. `radiosity::texel_light::compose_gathered`, the final
+    /// gather), and leaves the punctual lights out of the frame: a bake's light map holds
+    /// their direct light.
+    pub fn light_with(
+        render_scene: &mut RenderScene,
+        scene: &Scene,
+        compose: impl FnOnce(&Atlas) -> LightMap,
+    ) {
+        if let Some(atlas) = render_scene.atlas.clone() {
+            let map = compose(&atlas);
+            radiant_ecs::render::set_lightmap(render_scene, scene, &atlas, &map);
+        }
+        radiant_ecs::render::lit_by_bake(render_scene);
     }
 }

@@ -179,6 +179,17 @@ pub(crate) struct BakeArgs {
     #[arg(long, default_value_t = radiant::scene::atlas::MAX_SIDE,
           value_parser = clap::value_parser!(u32).range(64..=8192))]
     pub(crate) lightmap_page: u32,
+    #[command(flatten)]
+    pub(crate) light_map: LightMapArgs,
+    #[command(flatten)]
+    pub(crate) hierarchy: HierarchyArgs,
+    #[command(flatten)]
+    pub(crate) solve: SolveArgs,
+}
+
+/// How the light map is composed from the solution (`bake`, `render`).
+#[derive(Args, Debug, Clone, Copy)]
+pub(crate) struct LightMapArgs {
     /// Final gather: the light map's light other than the punctual lights' direct part is
     /// gathered at every texel with STRATA² rays into the solution (and 16 points on the
     /// emitters), instead of interpolated from the elements; 0: interpolated (fastest).
@@ -187,10 +198,16 @@ pub(crate) struct BakeArgs {
     pub(crate) final_gather: u32,
     #[command(flatten)]
     pub(crate) gather: GatherArgs,
-    #[command(flatten)]
-    pub(crate) hierarchy: HierarchyArgs,
-    #[command(flatten)]
-    pub(crate) solve: SolveArgs,
+}
+
+impl LightMapArgs {
+    /// The final gather's parameters, seeded by `seed`; `None` without a final gather.
+    pub(crate) fn gather(&self, seed: u64) -> Option<GatherParams> {
+        match self.final_gather {
+            0 => None,
+            strata => Some(self.gather.params(strata, seed)),
+        }
+    }
 }
 
 /// How a final gather samples (`bake --final-gather`, `converge --light-maps`).

@@ -65,6 +65,38 @@ fn render_writes_a_tone_mapped_png_a_linear_exr_and_a_report() {
     let _ = std::fs::remove_dir_all(&out);
 }
 
+/// `render --final-gather` draws the gathered light map: on the coarse bake above (elements
+/// of 0.3 m) the surfaces were measured at 2.8 % over 4×4 blocks with the smooth field and
+/// 1.0 % with a gather of 8 × 8 rays (0.8 % over 8×8 blocks); render.json says which.
+#[test]
+fn render_draws_the_final_gather() {
+    let out = tmp("gather");
+    run_ok(
+        &[
+            "render",
+            "--builtin",
+            "cornell-box",
+            "--patch-size",
+            "0.3",
+            "--size",
+            "96x80",
+            "--final-gather",
+            "8",
+        ],
+        &out,
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("json"))
+            .expect("valid json");
+    assert_eq!(report["final_gather"]["strata"], 8);
+    assert!(report["lightmap_s"].as_f64().expect("light-map seconds") > 0.0);
+    let s = &report["path_traced_reference"]["surfaces"];
+    let blocks = s["rel_l1_4x4"].as_f64().expect("4x4");
+    let coarse = s["rel_l1_8x8"].as_f64().expect("8x8");
+    assert!(blocks < 0.015, "surfaces over 4x4 blocks {blocks}");
+    assert!(coarse <= blocks * 1.05, "8x8 {coarse} against 4x4 {blocks}");
+}
+
 #[test]
 fn disabled_effects_are_not_in_the_frame() {
     let out = tmp("minimal");
@@ -401,4 +433,265 @@ fn without_an_adapter_render_says_why_and_bake_still_works() {
         "Mesa's noise: {stderr}"
     );
     assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+}
+
+/// The camera test's scene ([`camera_scene`]): where it was written, the markers (centre and
+/// colour channel), and the camera as glTF defines it.
+struct CameraScene {
+    path: PathBuf,
+    markers: Vec<([f64; 3], usize)>,
+    eye: glam::DVec3,
+    forward: glam::DVec3,
+    up: glam::DVec3,
+    yfov: f64,
+}
+
+/// A glTF scene no symmetry can hide a flip in: three coloured emissive squares on a wall
+/// (red up left, green up right, blue low in the middle), a floor they light, and a camera on
+/// a child node of a turned and shifted parent, itself tilted, with a 2:1 image. The camera
+/// as glTF defines it: the node's world transform applied to −Z and +Y.
+fn camera_scene(dir: &std::path::Path) -> CameraScene {
+    use glam::{DQuat, DVec3};
+    std::fs::create_dir_all(dir).expect("dir");
+    let mut bin: Vec<u8> = Vec::new();
+    let (mut views, mut accessors, mut meshes, mut nodes) = (vec![], vec![], vec![], vec![]);
+    // A quad as two triangles, counter-clockwise as seen from where it faces.
+    let mut quad = |corners: [[f32; 3]; 4], material: usize| {
+        let (lo, hi) = corners.iter().fold(
+            ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]),
+            |(lo, hi), p| {
+                (
+                    [0, 1, 2].map(|c| lo[c].min(p[c])),
+                    [0, 1, 2].map(|c| hi[c].max(p[c])),
+                )
+            },
+        );
+        let offset = bin.len();
+        for p in corners {
+            for v in p {
+                bin.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        for i in [0u16, 1, 2, 0, 2, 3] {
+            bin.extend_from_slice(&i.to_le_bytes());
+        }
+        bin.extend_from_slice(&[0, 0, 0, 0]); // 4-byte alignment
+        views.push(format!(
+            r#"{{"buffer":0,"byteOffset":{offset},"byteLength":48}}"#
+        ));
+        views.push(format!(
+            r#"{{"buffer":0,"byteOffset":{},"byteLength":12}}"#,
+            offset + 48
+        ));
+        let (pv, iv) = (views.len() - 2, views.len() - 1);
+        accessors.push(format!(
+            r#"{{"bufferView":{pv},"componentType":5126,"count":4,"type":"VEC3","min":{lo:?},"max":{hi:?}}}"#
+        ));
+        accessors.push(format!(
+            r#"{{"bufferView":{iv},"componentType":5123,"count":6,"type":"SCALAR"}}"#
+        ));
+        let (pa, ia) = (accessors.len() - 2, accessors.len() - 1);
+        meshes.push(format!(
+            r#"{{"primitives":[{{"attributes":{{"POSITION":{pa}}},"indices":{ia},"material":{material}}}]}}"#
+        ));
+        nodes.push(format!(r#"{{"mesh":{}}}"#, meshes.len() - 1));
+    };
+    // The wall (z = −4, facing +z) and the floor (y = −2.5, facing +y), grey.
+    quad(
+        [
+            [-6.0, -2.5, -4.0],
+            [6.0, -2.5, -4.0],
+            [6.0, 4.0, -4.0],
+            [-6.0, 4.0, -4.0],
+        ],
+        0,
+    );
+    quad(
+        [
+            [-6.0, -2.5, 3.0],
+            [6.0, -2.5, 3.0],
+            [6.0, -2.5, -4.0],
+            [-6.0, -2.5, -4.0],
+        ],
+        0,
+    );
+    let markers = [
+        ([-2.2, 1.0, -3.9], 0),
+        ([1.8, 1.3, -3.9], 1),
+        ([0.9, -1.4, -3.9], 2),
+    ];
+    for (i, (c, _)) in markers.iter().enumerate() {
+        let h = 0.35f32;
+        let [x, y, z] = [c[0] as f32, c[1] as f32, c[2] as f32];
+        quad(
+            [
+                [x - h, y - h, z],
+                [x + h, y - h, z],
+                [x + h, y + h, z],
+                [x - h, y + h, z],
+            ],
+            1 + i,
+        );
+    }
+    let (turn, tilt, yfov) = (0.15f64, 0.08f64, 0.7f64);
+    let rig_t = DVec3::new(0.6, 0.2, 0.0);
+    let rig_q = DQuat::from_rotation_y(turn);
+    let cam_t = DVec3::new(0.0, 0.0, 6.0);
+    let cam_q = DQuat::from_rotation_x(tilt);
+    let q = |q: DQuat| format!("[{},{},{},{}]", q.x, q.y, q.z, q.w);
+    let v = |v: DVec3| format!("[{},{},{}]", v.x, v.y, v.z);
+    nodes.push(format!(
+        r#"{{"translation":{},"rotation":{},"children":[{}]}}"#,
+        v(rig_t),
+        q(rig_q),
+        nodes.len() + 1
+    ));
+    nodes.push(format!(
+        r#"{{"name":"eye","translation":{},"rotation":{},"camera":0}}"#,
+        v(cam_t),
+        q(cam_q)
+    ));
+    let roots: Vec<String> = (0..nodes.len() - 1).map(|i| i.to_string()).collect();
+    let emissive = |rgb: [f64; 3]| {
+        format!(
+            r#"{{"pbrMetallicRoughness":{{"baseColorFactor":[0,0,0,1],"metallicFactor":0}},"emissiveFactor":{rgb:?},"extensions":{{"KHR_materials_emissive_strength":{{"emissiveStrength":4}}}}}}"#
+        )
+    };
+    let materials = [
+        r#"{"pbrMetallicRoughness":{"baseColorFactor":[0.5,0.5,0.5,1],"metallicFactor":0}}"#
+            .to_string(),
+        emissive([1.0, 0.0, 0.0]),
+        emissive([0.0, 1.0, 0.0]),
+        emissive([0.0, 0.0, 1.0]),
+    ];
+    let json = format!(
+        r#"{{"asset":{{"version":"2.0"}},"extensionsUsed":["KHR_materials_emissive_strength"],"scene":0,"scenes":[{{"nodes":[{}]}}],"nodes":[{}],"meshes":[{}],"materials":[{}],"accessors":[{}],"bufferViews":[{}],"buffers":[{{"byteLength":{},"uri":"scene.bin"}}],"cameras":[{{"type":"perspective","perspective":{{"yfov":{yfov},"aspectRatio":2.0,"znear":0.05,"zfar":100}}}}]}}"#,
+        roots.join(","),
+        nodes.join(","),
+        meshes.join(","),
+        materials.join(","),
+        accessors.join(","),
+        views.join(","),
+        bin.len()
+    );
+    std::fs::write(dir.join("scene.bin"), &bin).expect("bin");
+    let path = dir.join("scene.gltf");
+    std::fs::write(&path, json).expect("gltf");
+    let world = |p: DVec3| rig_t + rig_q * p;
+    let eye = world(cam_t);
+    let forward = rig_q * (cam_q * DVec3::NEG_Z);
+    let up = rig_q * (cam_q * DVec3::Y);
+    CameraScene {
+        path,
+        markers: markers.to_vec(),
+        eye,
+        forward,
+        up,
+        yfov,
+    }
+}
+
+/// The coverage-weighted centre (pixels, from the top-left corner) and area of the pixels
+/// where `channel` shines and the others do not.
+fn marker(img: &image::Rgba32FImage, channel: usize) -> Option<([f64; 2], f64)> {
+    let (mut sum, mut sx, mut sy) = (0.0, 0.0, 0.0);
+    for (x, y, p) in img.enumerate_pixels() {
+        let v = f64::from(p.0[channel]);
+        let others = (0..3).filter(|&c| c != channel).map(|c| f64::from(p.0[c]));
+        if v > 0.5 && others.clone().all(|o| o < 0.25 * v) {
+            let w = (v / 4.0).min(1.0);
+            sum += w;
+            sx += w * (f64::from(x) + 0.5);
+            sy += w * (f64::from(y) + 0.5);
+        }
+    }
+    (sum > 0.0).then(|| ([sx / sum, sy / sum], sum))
+}
+
+/// `radiant render` and `radiant reference --image` put the glTF camera's view in the same
+/// place: left is left, up is up, the image's aspect and the camera's vertical field of view
+/// as glTF defines them (a pinhole looking along the node's −Z, +Y up, through the parent's
+/// transform), checked at three coloured markers against where the pinhole puts them.
+#[test]
+fn render_and_reference_see_the_gltf_camera_alike() {
+    let dir = tmp("camera");
+    let CameraScene {
+        path,
+        markers,
+        eye,
+        forward,
+        up,
+        yfov,
+    } = camera_scene(&dir.join("scene"));
+    let scene = path.display().to_string();
+    let (w, h) = (160u32, 80u32);
+    run_ok(
+        &[
+            "reference",
+            &scene,
+            "--samples",
+            "16",
+            "--image",
+            "160x80",
+            "--no-surfaces",
+        ],
+        &dir.join("reference"),
+    );
+    run_ok(
+        &[
+            "render",
+            &scene,
+            "--size",
+            "160x80",
+            "--no-ssao",
+            "--no-bloom",
+        ],
+        &dir.join("render"),
+    );
+    let read = |p: PathBuf| image::open(&p).expect("exr").to_rgba32f();
+    let traced = read(dir.join("reference/image.exr"));
+    let frame = read(dir.join("render/frame.exr"));
+    assert_eq!(traced.dimensions(), (w, h));
+    assert_eq!(frame.dimensions(), (w, h));
+    // Where the pinhole puts each marker's square: the centroid and area of its projected
+    // corners (a plane quad projects to a quad), in pixels.
+    let right = forward.cross(up).normalize();
+    let tan = (0.5 * yfov).tan();
+    let aspect = f64::from(w) / f64::from(h);
+    let project = |p: glam::DVec3| {
+        let d = p - eye;
+        let z = d.dot(forward);
+        glam::DVec2::new(
+            0.5 * (1.0 + d.dot(right) / z / (tan * aspect)) * f64::from(w),
+            0.5 * (1.0 - d.dot(up) / z / tan) * f64::from(h),
+        )
+    };
+    for (centre, channel) in markers {
+        let c = glam::DVec3::from(centre);
+        let q = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+            .map(|(x, y)| project(c + glam::DVec3::new(0.35 * x, 0.35 * y, 0.0)));
+        let (mut area, mut cx, mut cy) = (0.0, 0.0, 0.0);
+        for i in 0..4 {
+            let (p, n) = (q[i], q[(i + 1) % 4]);
+            let cross = p.perp_dot(n);
+            area += 0.5 * cross;
+            cx += (p.x + n.x) * cross / 6.0;
+            cy += (p.y + n.y) * cross / 6.0;
+        }
+        let want = [cx / area, cy / area];
+        let area = area.abs();
+        for (what, img) in [("render", &frame), ("reference", &traced)] {
+            let (got, covered) = marker(img, channel)
+                .unwrap_or_else(|| panic!("{what}: marker {channel} is not in the image"));
+            let off = ((got[0] - want[0]).powi(2) + (got[1] - want[1]).powi(2)).sqrt();
+            assert!(
+                off < 0.6,
+                "{what}: marker {channel} at {got:?}, the pinhole puts it at {want:?}"
+            );
+            assert!(
+                (covered / area - 1.0).abs() < 0.2,
+                "{what}: marker {channel} covers {covered:.1} px, the pinhole {area:.1}"
+            );
+        }
+    }
 }
