@@ -91,7 +91,7 @@ pub(crate) fn exposure_keeping(
 /// regular set, aliased with regular geometry: on the rooms of `tools/make_rooms.py` they lie
 /// on the boxes' lattice, between the boxes, and the 1 M room's floor counted 8 % of itself
 /// buried where 25 % is.
-fn points(v: &[DVec3; 3], rng: &mut crate::rng::Rng) -> [DVec3; POINTS] {
+pub(crate) fn points(v: &[DVec3; 3], rng: &mut crate::rng::Rng) -> [DVec3; POINTS] {
     // Each ninth by its corners, in barycentric thirds along v1 − v0 and v2 − v0.
     const UP: [(f64, f64); 6] = [(0., 0.), (1., 0.), (2., 0.), (0., 1.), (1., 1.), (0., 2.)];
     const DOWN: [(f64, f64); 3] = [(0., 0.), (1., 0.), (0., 1.)];

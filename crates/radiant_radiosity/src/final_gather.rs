@@ -370,8 +370,8 @@ impl<V: Visibility> FinalGather<'_, V> {
 
 /// A final gather at the elements: `passes` times, every element of `mesh` (with reflectance
 /// and not enclosed) takes `B = E + ρ H`, `H` the punctual lights' direct part the bake gave
-/// it (one ray from its centroid per light) plus the mean of what [`FinalGather::gather`]
-/// finds at the open ones of its four quarter centroids in the last pass's solution (the
+/// it (nine shadow rays per light, [`crate::lights::direct_irradiance`]) plus the mean of
+/// what [`FinalGather::gather`] finds at the open ones of its four quarter centroids in the last pass's solution (the
 /// first: `radiosity`). The solve's sources carry the error of elements that span what
 /// covers part of them; gathered at their own points they pass on what those points receive.
 pub fn regather_elements<V: Visibility>(

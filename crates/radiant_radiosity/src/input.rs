@@ -436,8 +436,9 @@ pub fn materials(
     (rho, emission)
 }
 
-/// Irradiance (lux per unit of colour) at each element's centroid from the punctual lights and
-/// the sky, shadowed; `None` when the scene has neither.
+/// Irradiance (lux per unit of colour) per element from the punctual lights (the mean over
+/// nine points, [`crate::lights::direct_irradiance`]) and the sky (at its centroid), shadowed;
+/// `None` when the scene has neither.
 pub fn direct_irradiance(
     lights: &[Light],
     sky: Option<&Sky>,

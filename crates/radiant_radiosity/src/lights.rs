@@ -11,7 +11,11 @@ use radiant_visibility::Visibility;
 
 use crate::mesh::Mesh;
 
-/// Irradiance (linear RGB, lux) at each element's centroid from all lights, with shadows.
+/// Irradiance (linear RGB, lux) from all lights, with shadows, per element: the mean over
+/// its [`crate::exposure::POINTS`] points, one at random in each ninth of it (as the exposure
+/// probes take them), a shadow ray each. One ray from the centroid was biased where regular
+/// geometry casts regular shadows: on Sponza's floor and arches the centroids lay in shadow
+/// more often than the elements did (their sun 16 % and 28 % below the nine points' mean).
 pub fn direct_irradiance(mesh: &Mesh, lights: &[Light], vis: &dyn Visibility) -> Vec<[f64; 3]> {
     use rayon::prelude::*;
     let mut out = vec![[0.0; 3]; mesh.element_count()];
@@ -26,27 +30,38 @@ pub fn direct_irradiance(mesh: &Mesh, lights: &[Light], vis: &dyn Visibility) ->
 /// [`direct_irradiance`] of one element.
 pub fn irradiance_at(mesh: &Mesh, lights: &[Light], vis: &dyn Visibility, leaf: usize) -> [f64; 3] {
     let frame = mesh.frame;
+    let node = mesh.leaf_node(leaf as u32);
+    let points = shadow_points(mesh, leaf);
     let mut e = [0.0; 3];
     for light in lights {
         let local = frame.to_local(light.position);
-        light_one(mesh, frame, light, local, leaf, &mut e, vis);
+        for &x in &points {
+            light_one(frame, light, local, (x, node.normal), &mut e, vis);
+        }
     }
-    e
+    e.map(|v| v / points.len() as f64)
+}
+
+/// The points of element `leaf` whose shadow rays [`irradiance_at`] casts. Seeded by the
+/// element's stable id alone: the light map takes the same direct part out of the field as the
+/// bake put in, bit for bit (`texel_light`), and an edit knows which rays a change can meet.
+pub(crate) fn shadow_points(mesh: &Mesh, leaf: usize) -> [glam::DVec3; crate::exposure::POINTS] {
+    let node = mesh.leaf_node(leaf as u32);
+    let id = mesh.stable_id(mesh.leaves[leaf]);
+    let mut rng = crate::rng::Rng::new(crate::rng::hash(0x11_6475, id, 0));
+    crate::exposure::points(&node.v, &mut rng)
 }
 
 #[inline]
 fn light_one(
-    mesh: &Mesh,
     frame: crate::mesh::Frame,
     light: &Light,
     local: glam::DVec3,
-    leaf: usize,
+    (x, n): (glam::DVec3, glam::DVec3),
     e: &mut [f64; 3],
     vis: &dyn Visibility,
 ) {
-    let node = mesh.leaf_node(leaf as u32);
-    let x = node.centroid;
-    let Some((irr, target)) = unshadowed(frame, light, local, x, node.normal) else {
+    let Some((irr, target)) = unshadowed(frame, light, local, x, n) else {
         return;
     };
     if !vis.segment_clear(x.as_vec3(), target.as_vec3()) {

@@ -3,8 +3,8 @@
 //! the solution (bounced light, emitters, the sky) from the smooth field of the elements; and
 //! where part of a texel lies inside or under other geometry, only the part in the open.
 //!
-//! Why: the solution carries a light's direct part by elements, each lit or shadowed by one
-//! ray from its centroid and interpolated across its neighbours, so a shadow edge lands where
+//! Why: the solution carries a light's direct part by elements, each lit or shadowed by the
+//! mean of nine rays and interpolated across its neighbours, so a shadow edge lands where
 //! the element grid puts it (metre-wide elements on a level: bands of sun leaking into shadow,
 //! sunlit texels darkened near an edge). The solution keeps that direct light for its bounces;
 //! the light map takes it out again, `B − ρ D / π` per element with the same rays, and adds
@@ -537,7 +537,7 @@ pub fn compose_with<V: Visibility>(
 
 impl<V: Visibility> TexelLights<V> {
     /// Per element of `mesh`, the lights' direct `D / π` the bake put into its source term
-    /// (one ray from its centroid per light, [`crate::lights::direct_irradiance`], with these
+    /// (nine points per element, [`crate::lights::direct_irradiance`], with these
     /// rays: bit for bit the bake's); empty without lights.
     pub fn element_direct(&self, mesh: &Mesh) -> Vec<Rgb> {
         if self.is_empty() {

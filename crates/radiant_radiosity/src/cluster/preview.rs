@@ -314,12 +314,17 @@ fn may_change(mesh: &Mesh, leaf: u32, lit: &Lit, (lo, hi): (DVec3, DVec3)) -> bo
         return false;
     }
     let x = mesh.leaf_node(leaf).centroid;
-    let crosses = lit.scene.lights.iter().any(|light| {
-        let target = match light.kind {
-            radiant_scene::LightKind::Directional => x - light.direction * 4.0,
-            _ => mesh.frame.to_local(light.position),
-        };
-        segment_meets_box(x, target, lo, hi)
+    // The lights' shadow rays, from the element's own points (`lights::shadow_points`).
+    let points =
+        (!lit.scene.lights.is_empty()).then(|| crate::lights::shadow_points(mesh, leaf as usize));
+    let crosses = points.iter().flatten().any(|&p| {
+        lit.scene.lights.iter().any(|light| {
+            let target = match light.kind {
+                radiant_scene::LightKind::Directional => p - light.direction * 4.0,
+                _ => mesh.frame.to_local(light.position),
+            };
+            segment_meets_box(p, target, lo, hi)
+        })
     });
     let near = lit.scene.sky.as_ref().is_some_and(|s| !s.is_dark()) && {
         let reach = 2.0 * (hi - lo).length();
