@@ -437,8 +437,8 @@ pub fn materials(
 }
 
 /// Irradiance (lux per unit of colour) per element from the punctual lights (the mean over
-/// nine points, [`crate::lights::direct_irradiance`]) and the sky (at its centroid), shadowed;
-/// `None` when the scene has neither.
+/// nine points, [`crate::lights::direct_irradiance`]) and the sky (its rays from the same nine
+/// points in turn), shadowed; `None` when the scene has neither.
 pub fn direct_irradiance(
     lights: &[Light],
     sky: Option<&Sky>,
@@ -466,10 +466,11 @@ pub fn direct_irradiance(
     Some(e)
 }
 
-/// Irradiance from the sky at each element's centroid: `rays` cosine-weighted directions
-/// (stratified on a √rays × √rays grid, jittered by a generator seeded with the element's
-/// stable id), each that leaves the scene unblocked adding `π · L_sky / rays`. Exact in the
-/// mean; an unoccluded element under a uniform sky gets exactly `π · L`.
+/// Irradiance from the sky at each element, its mean over the element: `rays` cosine-weighted
+/// directions (stratified on a √rays × √rays grid, jittered by a generator seeded with the
+/// element's stable id), from its nine points in turn, each that leaves the scene unblocked
+/// adding `π · L_sky / rays`. Exact in the mean; an unoccluded element under a uniform sky gets
+/// exactly `π · L`.
 pub fn sky_irradiance(
     mesh: &Mesh,
     sky: &Sky,
@@ -500,12 +501,16 @@ fn sky_at(
     let n = node.normal;
     let (t, b) = n.any_orthonormal_pair();
     let mut rng = crate::rng::Rng::new(crate::rng::hash(seed, mesh.stable_id(id), 0x5C7));
-    // The scene fits in the unit cube around the origin: 1.75 units (past its half
-    // diagonal) always leave it, and keep the segment's end cut short.
-    let origin = node.centroid + n * 1e-5;
+    // The rays leave from the element's nine points in turn (the lights' shadow points, one
+    // at random in each ninth): the mean over the element, not its centroid's view, which a
+    // regular set of centroids aliases with regular geometry as the lights' did.
+    let points = crate::lights::shadow_points(mesh, leaf);
     let mut sum = DVec3::ZERO;
     for i in 0..side {
         for j in 0..side {
+            // The scene fits in the unit cube around the origin: 1.75 units (past its half
+            // diagonal) always leave it, and keep the segment's end cut short.
+            let origin = points[(i * side + j) as usize % points.len()] + n * 1e-5;
             let u1 = (f64::from(i) + rng.f64()) / f64::from(side);
             let u2 = (f64::from(j) + rng.f64()) / f64::from(side);
             let r = u1.sqrt();
