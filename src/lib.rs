@@ -54,41 +54,28 @@ pub mod bridge {
     ) -> Result<RenderScene, RenderError> {
         let mut rs = RenderScene::from_scene(scene, texel_density)?;
         if let Some(bake) = bake {
-            fill_lightmap_from_bake(&mut rs, scene, bake);
-            // The bake holds the punctual lights' direct light (shadowed): draw it once.
-            radiant_ecs::render::lit_by_bake(&mut rs);
+            // The light map the bake writes (`radiosity::texel_light::compose_lightmap` on the
+            // renderer's own atlas: the lights' direct light per texel, the open part of
+            // texels at contacts, the smooth field for the rest), so the frame shows what
+            // `lightmap.exr`, the export and `bake --points` hold.
+            light_with(&mut rs, scene, |atlas| {
+                radiant_radiosity::texel_light::compose_lightmap(
+                    scene,
+                    atlas,
+                    &bake.mesh,
+                    &bake.system,
+                    &bake.radiosity,
+                )
+            });
         }
         Ok(rs)
-    }
-
-    /// Fills `render_scene`'s light map (made by `RenderScene::from_scene(scene, ..)`) with the
-    /// light map the bake writes (`radiosity::texel_light::compose_lightmap` on the renderer's
-    /// own atlas: the lights' direct light per texel, the open part of texels at contacts, the
-    /// smooth field for the rest), so the frame shows what `lightmap.exr`, the export and
-    /// `bake --points` hold. An untextured surface's `H` is scaled by its reflectance over the
-    /// 8-bit base colour the renderer stores, so `albedo × H` is the bake's.
-    pub fn fill_lightmap_from_bake(
-        render_scene: &mut RenderScene,
-        scene: &Scene,
-        bake: &BakeResult,
-    ) {
-        let Some(atlas) = render_scene.atlas.clone() else {
-            return;
-        };
-        let map = radiant_radiosity::texel_light::compose_lightmap(
-            scene,
-            &atlas,
-            &bake.mesh,
-            &bake.system,
-            &bake.radiosity,
-        );
-        radiant_ecs::render::set_lightmap(render_scene, scene, &atlas, &map);
     }
 
     /// Fills `render_scene`'s light map with the one `compose` makes on the renderer's own
     /// atlas (`render_scene.atlas`; e.g. `radiosity::texel_light::compose_gathered`, the final
     /// gather), and leaves the punctual lights out of the frame: a bake's light map holds
-    /// their direct light.
+    /// their direct light. An untextured surface's `H` is scaled by its reflectance over the
+    /// 8-bit base colour the renderer stores, so `albedo × H` is the bake's.
     pub fn light_with(
         render_scene: &mut RenderScene,
         scene: &Scene,

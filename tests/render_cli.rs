@@ -7,6 +7,12 @@ use std::path::PathBuf;
 mod common;
 use common::{radiant, run_ok, tmp};
 
+/// The render.json `radiant render` wrote in `out`.
+fn render_json(out: &std::path::Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(out.join("render.json")).expect("render.json");
+    serde_json::from_str(&text).expect("valid json")
+}
+
 #[test]
 fn render_writes_a_tone_mapped_png_a_linear_exr_and_a_report() {
     let out = tmp("ok");
@@ -46,9 +52,7 @@ fn render_writes_a_tone_mapped_png_a_linear_exr_and_a_report() {
         (17.0..19.0).contains(&brightest),
         "brightest red radiance {brightest}"
     );
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("json"))
-            .expect("valid json");
+    let report = render_json(&out);
     assert_eq!(report["baked"], true);
     let passes = report["graph"]["passes"].as_array().expect("passes");
     assert!(passes.iter().any(|p| p == "ssao_pass"));
@@ -85,9 +89,7 @@ fn render_draws_the_final_gather() {
         ],
         &out,
     );
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("json"))
-            .expect("valid json");
+    let report = render_json(&out);
     assert_eq!(report["final_gather"]["strata"], 8);
     assert!(report["lightmap_s"].as_f64().expect("light-map seconds") > 0.0);
     let s = &report["path_traced_reference"]["surfaces"];
@@ -125,9 +127,7 @@ fn disabled_effects_are_not_in_the_frame() {
         "{}",
         String::from_utf8_lossy(&st.stderr)
     );
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("json"))
-            .expect("valid json");
+    let report = render_json(&out);
     assert_eq!(
         report["graph"]["passes"],
         serde_json::json!(["gbuffer_pass", "lighting_pass", "tonemapping_pass"])
@@ -152,9 +152,7 @@ fn a_scene_without_emitters_renders_without_a_bake() {
         String::from_utf8_lossy(&st.stderr)
     );
     assert!(String::from_utf8_lossy(&st.stdout).contains("no bake"));
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("json"))
-            .expect("valid json");
+    let report = render_json(&out);
     assert_eq!(report["baked"], false);
     let _ = std::fs::remove_dir_all(&out);
 }
@@ -170,6 +168,9 @@ fn bad_render_flags_give_one_line() {
         vec!["--exposure", "nan"],
         vec!["--texel-density", "0"],
         vec!["--texel-density", "inf"],
+        vec!["--final-gather", "65"],
+        vec!["--final-gather", "-1"],
+        vec!["--final-gather", "4", "--gather-stride", "0"],
     ] {
         let out = tmp("bad");
         let st = radiant()
@@ -221,9 +222,7 @@ fn render_compares_with_the_reference_tracers_image() {
         ],
         &out,
     );
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("json"))
-            .expect("valid json");
+    let report = render_json(&out);
     let r = &report["path_traced_reference"];
     assert_eq!(r["size"], serde_json::json!([32, 32]));
     // The same light as the bake, seen through 64 noisy paths per pixel: no bias beyond the
@@ -350,9 +349,7 @@ fn render_draws_the_same_frame_on_the_gl_backend() {
             !stderr.contains("Validation Error") && !stderr.contains("error:"),
             "{backend}: {stderr}"
         );
-        let report: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("render.json")).expect("json"))
-                .expect("valid json");
+        let report = render_json(&out);
         let adapter = report["adapter"].as_str().expect("adapter").to_string();
         assert!(
             adapter.to_lowercase().contains(&format!("({backend})")),

@@ -174,15 +174,13 @@ mod tests {
         assert_eq!(fraction(POINTS as u8), 1.0);
     }
 
-    #[test]
-    fn a_box_on_a_floor_covers_the_share_of_its_elements_it_stands_on() {
-        // A 4 × 4 m floor in 1 m elements under a closed box over x < 1.5: the elements at
-        // x < 1 are enclosed, those at x > 2 open, those across x = 1.5 half covered.
+    /// A 4 × 4 m floor (surface 0) in 1 m elements under closed geometry `cover`: the mesh
+    /// and each element's exposure.
+    fn floor_under(cover: &[[DVec3; 3]]) -> (Mesh, Vec<u8>) {
         let mut scene = radiant_scene::Scene::default();
         let floor = crate::scenes::quad(DVec3::ZERO, DVec3::Z * 4.0, DVec3::X * 4.0);
         crate::scenes::add_surface(&mut scene, "floor", [0.5; 3], [0.0; 3], &floor);
-        let block = crate::scenes::box_triangles(DVec3::ZERO, DVec3::new(1.5, 1.0, 4.0), false);
-        crate::scenes::add_surface(&mut scene, "box", [0.5; 3], [0.0; 3], &block);
+        crate::scenes::add_surface(&mut scene, "cover", [0.5; 3], [0.0; 3], cover);
         let params = crate::mesh::MeshParams {
             patch_size: 10.0,
             element_levels: 2,
@@ -191,6 +189,15 @@ mod tests {
         let mesh = Mesh::new(&scene, &params).expect("mesh");
         let bvh = crate::input::visibility(&mesh, None);
         let live = exposure(&mesh, &bvh, 7);
+        (mesh, live)
+    }
+
+    #[test]
+    fn a_box_on_a_floor_covers_the_share_of_its_elements_it_stands_on() {
+        // A 4 × 4 m floor in 1 m elements under a closed box over x < 1.5: the elements at
+        // x < 1 are enclosed, those at x > 2 open, those across x = 1.5 half covered.
+        let block = crate::scenes::box_triangles(DVec3::ZERO, DVec3::new(1.5, 1.0, 4.0), false);
+        let (mesh, live) = floor_under(&block);
         let (mut area, mut open, mut partial) = (0.0, 0.0, 0);
         for (i, &l) in live.iter().enumerate() {
             let node = mesh.leaf_node(i as u32);
@@ -228,9 +235,6 @@ mod tests {
         // regular set of probe points on that lattice lies in the gaps between the boxes (the
         // 1 M room's floor counted 8 % buried where 25 % is); one random point in each ninth
         // of an element does not.
-        let mut scene = radiant_scene::Scene::default();
-        let floor = crate::scenes::quad(DVec3::ZERO, DVec3::Z * 4.0, DVec3::X * 4.0);
-        crate::scenes::add_surface(&mut scene, "floor", [0.5; 3], [0.0; 3], &floor);
         let (k, cell) = (36, 4.0 / 36.0);
         let mut boxes = Vec::new();
         for i in 0..k {
@@ -243,16 +247,9 @@ mod tests {
                 ));
             }
         }
-        crate::scenes::add_surface(&mut scene, "boxes", [0.5; 3], [0.0; 3], &boxes);
-        let params = crate::mesh::MeshParams {
-            patch_size: 10.0,
-            element_levels: 2,
-            ..Default::default()
-        };
-        let mesh = Mesh::new(&scene, &params).expect("mesh");
-        let bvh = crate::input::visibility(&mesh, None);
+        let (mesh, live) = floor_under(&boxes);
         let (mut area, mut open) = (0.0, 0.0);
-        for (i, &l) in exposure(&mesh, &bvh, 7).iter().enumerate() {
+        for (i, &l) in live.iter().enumerate() {
             let node = mesh.leaf_node(i as u32);
             if mesh.root_surface[node.root as usize] == 0 {
                 area += node.area;
