@@ -34,8 +34,7 @@ fn spectral_materials(
 ) -> anyhow::Result<std::collections::HashMap<String, radiant::radiosity::spectral::SpectralMaterial>>
 {
     let text = match (file, shipped) {
-        (Some(p), _) => std::fs::read_to_string(p)
-            .with_context(|| format!("cannot read spectra {}", p.display()))?,
+        (Some(p), _) => crate::common::read_text(p, "spectra")?,
         (None, Some(s)) => s.spectra.to_string(),
         (None, None) => anyhow::bail!("--spectral needs --spectra FILE for this scene"),
     };
@@ -127,6 +126,14 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         ),
     };
     args.solve.init_threads()?;
+    if let Some(p) = &args.checkpoint
+        && std::fs::metadata(p).is_ok_and(|m| !m.is_file())
+    {
+        anyhow::bail!(
+            "--checkpoint {}: not a regular file (a checkpoint is read from and written to a file)",
+            p.display()
+        );
+    }
     let job = prepare(args, solver)?;
     let clustered = use_clustered(args.hierarchy.hierarchy, &job.scene, &job.params)?;
     // Read before the bake, so that a bad spectra file fails at once.

@@ -19,14 +19,34 @@ impl SceneArgs {
     }
 }
 
+/// The most bytes a text input (a CSV of points or surfaces, a spectra file) may have.
+pub(crate) const MAX_TEXT_INPUT: u64 = 256 << 20;
+
+/// Reads a file a user named on the command line (`what` says which, e.g. `--points`): a
+/// regular file of at most `max_bytes`; a device, a pipe or a larger file is refused in one line
+/// instead of being read without end.
+pub(crate) fn read_input(path: &Path, what: &str, max_bytes: u64) -> anyhow::Result<Vec<u8>> {
+    radiant::scene::read_regular_file(path, max_bytes)
+        .map_err(|e| anyhow::anyhow!("cannot read {what} {}: {e}", path.display()))
+}
+
+/// [`read_input`] for text: UTF-8 of at most [`MAX_TEXT_INPUT`] bytes.
+pub(crate) fn read_text(path: &Path, what: &str) -> anyhow::Result<String> {
+    String::from_utf8(read_input(path, what, MAX_TEXT_INPUT)?).map_err(|_| {
+        anyhow::anyhow!(
+            "cannot read {what} {}: it is not UTF-8 text",
+            path.display()
+        )
+    })
+}
+
 /// The per-surface reference for a bake: a given CSV, or the one shipped with a builtin scene.
 pub fn reference_for(
     scene: &SceneArgs,
     given: Option<&Path>,
 ) -> anyhow::Result<Option<NamedReference>> {
     if let Some(path) = given {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read reference {}", path.display()))?;
+        let text = read_text(path, "reference")?;
         let rows =
             metrics::parse_reference_csv(&text).with_context(|| format!("{}", path.display()))?;
         return Ok(Some((path.display().to_string(), rows)));

@@ -5,7 +5,6 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use anyhow::Context;
 use glam::DVec3;
 use radiant::radiosity::lightmap::LightMap;
 use radiant::radiosity::metrics::{self, PointComparison, PointReference, PointSpec};
@@ -14,6 +13,7 @@ use radiant::scene::Scene;
 use radiant::scene::atlas::Atlas;
 use serde_json::json;
 
+use crate::common::read_text;
 use crate::output::csv_name;
 
 /// Millimetres to scene units for a points file in the Mitsuba layout (glTF is in metres).
@@ -35,17 +35,14 @@ pub(crate) fn read(
     points: &Path,
     reference: Option<&Path>,
 ) -> anyhow::Result<AskedPoints> {
-    let read = |p: &Path| {
-        std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display()))
-    };
-    let specs = metrics::parse_point_positions(&read(points)?, MM)
+    let specs = metrics::parse_point_positions(&read_text(points, "--points")?, MM)
         .map_err(|e| anyhow::anyhow!("--points {}: {e}", points.display()))?;
     let located = shown::locate_all(scene, &specs)
         .map_err(|e| anyhow::anyhow!("--points {}: {e}", points.display()))?;
     let reference = match reference {
         None => None,
         Some(path) => {
-            let rows = metrics::parse_point_csv(&read(path)?, MM)
+            let rows = metrics::parse_point_csv(&read_text(path, "--reference-points")?, MM)
                 .map_err(|e| anyhow::anyhow!("--reference-points {}: {e}", path.display()))?;
             if let Some(p) = specs
                 .iter()

@@ -4,7 +4,6 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::Context as _;
 use clap::Args;
 use radiant::reference::{
     Estimate, ImageEstimate, Params, Point, Progress, Run, SurfaceEstimate, Tracer,
@@ -115,8 +114,7 @@ fn parse_image_size(s: &str) -> anyhow::Result<(u32, u32)> {
 /// Reads a points CSV in scene units (`x,y,z`) or the Mitsuba layout in millimetres, as
 /// `radiant bake --points` reads it (`metrics::parse_point_positions`).
 fn read_points(path: &Path) -> anyhow::Result<Vec<Point>> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let text = crate::common::read_text(path, "--points")?;
     let specs = radiant::radiosity::metrics::parse_point_positions(&text, 1e-3)
         .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     Ok(specs

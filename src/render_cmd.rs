@@ -151,7 +151,11 @@ fn against_reference(
 ) -> anyhow::Result<serde_json::Value> {
     // Error against a path tracer from the same camera: radiance, no SSAO, no bloom.
     let reference = match (&args.reference_image, args.scene.builtin) {
-        (Some(p), _) => Some(std::fs::read(p).with_context(|| format!("{}", p.display()))?),
+        (Some(p), _) => Some(crate::common::read_input(
+            p,
+            "--reference-image",
+            4 << 30, // a float EXR of 16384² RGBA texels
+        )?),
         (None, Some(crate::args::BuiltinScene(Builtin::CornellBox))) => {
             Some(CORNELL_RENDER_REFERENCE.to_vec())
         }

@@ -76,6 +76,19 @@ const CASES: &[(&str, Expect)] = &[
     ("image_view_out_of_bounds.gltf", |e| {
         matches!(e, SceneError::Invalid(_))
     }),
+    // Image sources glTF 2.0 forbids (fuzzing found the first panicking in the gltf crate).
+    (
+        "image_view_without_mime.gltf",
+        |e| matches!(e, SceneError::Invalid(what) if what.contains("images[0] has a bufferView but no mimeType")),
+    ),
+    (
+        "image_without_source.gltf",
+        |e| matches!(e, SceneError::Invalid(what) if what.contains("images[0]")),
+    ),
+    (
+        "image_uri_and_view.gltf",
+        |e| matches!(e, SceneError::Invalid(what) if what.contains("images[0] has both")),
+    ),
     ("index_out_of_range.gltf", |e| {
         matches!(
             e,

@@ -188,6 +188,16 @@ fn converge_writes_curves_for_each_combination() {
 #[test]
 fn bad_input_gives_one_line_and_nonzero_exit() {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/bad_inputs");
+    // A pipe where a checkpoint would go (a pipe, not a device: were the refusal to fail, a
+    // rename would replace it, not /dev/null).
+    let fifo_dir = tmp("fifo");
+    std::fs::create_dir_all(&fifo_dir).expect("dir");
+    let fifo = fifo_dir.join("bake.ckpt");
+    let made = std::process::Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .expect("mkfifo runs");
+    assert!(made.success());
     let cases: Vec<Vec<String>> = vec![
         vec![
             "bake".into(),
@@ -226,6 +236,39 @@ fn bad_input_gives_one_line_and_nonzero_exit() {
             "cornell-box".into(),
             "--reference".into(),
             "/does/not/exist.csv".into(),
+        ],
+        // Devices named as inputs: refused before a byte is read (were read without end), and a
+        // checkpoint is never written in a device's place.
+        vec!["bake".into(), "/dev/zero".into()],
+        vec![
+            "bake".into(),
+            "--builtin".into(),
+            "cornell-box".into(),
+            "--points".into(),
+            "/dev/zero".into(),
+        ],
+        vec![
+            "bake".into(),
+            "--builtin".into(),
+            "cornell-box".into(),
+            "--reference".into(),
+            "/dev/urandom".into(),
+        ],
+        vec![
+            "bake".into(),
+            "--builtin".into(),
+            "cornell-box".into(),
+            "--checkpoint".into(),
+            fifo.display().to_string(),
+        ],
+        vec![
+            "reference".into(),
+            "--builtin".into(),
+            "cornell-box".into(),
+            "--samples".into(),
+            "8".into(),
+            "--points".into(),
+            "/dev/zero".into(),
         ],
         vec![
             "reference".into(),
@@ -274,6 +317,11 @@ fn bad_input_gives_one_line_and_nonzero_exit() {
         assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
         let _ = std::fs::remove_dir_all(&out);
     }
+    assert!(
+        std::fs::metadata(&fifo).is_ok_and(|m| !m.is_file()),
+        "the pipe was replaced"
+    );
+    let _ = std::fs::remove_dir_all(&fifo_dir);
 }
 
 #[test]

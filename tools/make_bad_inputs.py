@@ -188,6 +188,21 @@ def image_view_out_of_bounds(d):
 case("image_view_out_of_bounds.gltf", mutated(image_view_out_of_bounds))
 
 
+def image_source(**image):
+    # A base-colour image whose source glTF 2.0 forbids (found by fuzzing: the gltf crate
+    # unwrapped the missing MIME type of a buffer-view image and panicked).
+    def apply(d):
+        image_view_out_of_bounds(d)
+        d["bufferViews"][2] = {"buffer": 0, "byteOffset": 0, "byteLength": 8}
+        d["images"] = [image]
+    return apply
+
+
+case("image_view_without_mime.gltf", mutated(image_source(bufferView=2)))
+case("image_without_source.gltf", mutated(image_source(name="nothing")))
+case("image_uri_and_view.gltf", mutated(image_source(bufferView=2, mimeType="image/png", uri="t.png")))
+
+
 def png_1x1(rgba):
     """A valid 1 x 1 RGBA PNG."""
     import zlib

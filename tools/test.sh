@@ -99,6 +99,7 @@ fi
 
 say "cargo fmt --check"
 cargo fmt --all --check
+cargo fmt --manifest-path fuzz/Cargo.toml --check
 
 say "cargo clippy (all targets, warnings are errors)"
 cargo clippy --workspace --all-targets --locked -- -D warnings
@@ -108,3 +109,8 @@ RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --locked
 
 say "cargo test (workspace)"
 cargo test --workspace --locked --no-fail-fast
+
+# libFuzzer on stable Rust, its own instrumented build in fuzz/target: a regression in an
+# importer is caught here, long runs are tools/fuzz.sh's `run`.
+say "fuzz smoke: each input's target for 10 s from its seeds (tools/fuzz.sh)"
+bash tools/fuzz.sh smoke 10

@@ -251,8 +251,13 @@ impl Cursor<'_> {
 /// Reads and checks a checkpoint. Every size is checked against the file length before
 /// anything is allocated, so a corrupt file is an error, not a crash.
 pub fn read(path: &Path) -> Result<Saved, BakeError> {
+    read_from(open(path)?, path)
+}
+
+/// [`read`] on a checkpoint's bytes held in memory; `path` names it in errors.
+pub fn read_from(data: Vec<u8>, path: &Path) -> Result<Saved, BakeError> {
     let bad = |what: &'static str| corrupt(path, what);
-    let (data, version) = open(path, false, 32)?;
+    let (data, version) = checked(data, path, false, 32)?;
     let body = &data[..data.len() - 8];
     let mut c = Cursor { data: body, at: 16 };
     let header = if version == 1 { 32 } else { 48 };
@@ -341,12 +346,36 @@ pub fn read(path: &Path) -> Result<Saved, BakeError> {
     })
 }
 
-/// Reads a checkpoint of one hierarchy (`clustered`: version 3 or 4, else 1 or 2) with at least
-/// `header` bytes after the magic, and checks its checksum; returns the bytes and the version.
+/// Reads a checkpoint file: a regular file (a device or a pipe is refused, not read without
+/// end).
+fn open(path: &Path) -> Result<Vec<u8>, BakeError> {
+    radiant_scene::read_regular_file(path, u64::MAX).map_err(|message| {
+        CheckpointError::Io {
+            path: path.display().to_string(),
+            source: std::io::Error::other(message),
+        }
+        .into()
+    })
+}
+
+/// Appends the checksum a checkpoint ends with to `body` (the magic, version and contents), as
+/// [`write()`] does: a tool or a fuzzer that builds a checkpoint's bytes seals them with it.
+pub fn seal(body: &mut Vec<u8>) {
+    let mut h = Fnv::new();
+    h.bytes(body);
+    body.extend_from_slice(&h.0.to_le_bytes());
+}
+
+/// Checks a checkpoint of one hierarchy (`clustered`: version 3 or 4, else 1 or 2) with at least
+/// `header` bytes after the magic, and its checksum; returns the bytes and the version.
 /// The other hierarchy's file is [`BakeError::CheckpointHierarchy`].
-fn open(path: &Path, clustered: bool, header: usize) -> Result<(Vec<u8>, u8), BakeError> {
+fn checked(
+    data: Vec<u8>,
+    path: &Path,
+    clustered: bool,
+    header: usize,
+) -> Result<(Vec<u8>, u8), BakeError> {
     let at = || path.display().to_string();
-    let data = std::fs::read(path).map_err(|source| CheckpointError::Io { path: at(), source })?;
     let version = (data.len() >= 16 && &data[..15] == MAGIC).then(|| data[15]);
     let ours = |v: u8| is_clustered(v) == clustered;
     let known = |v: u8| matches!(v, 1 | 2) || is_clustered(v);
@@ -455,8 +484,13 @@ pub fn write_clustered(
 /// Reads and checks a clustered checkpoint (sizes before allocation, structure, finite
 /// values); a per-triangle one is [`BakeError::CheckpointHierarchy`].
 pub fn read_clustered(path: &Path) -> Result<SavedClustered, BakeError> {
+    read_clustered_from(open(path)?, path)
+}
+
+/// [`read_clustered`] on a checkpoint's bytes held in memory; `path` names it in errors.
+pub fn read_clustered_from(data: Vec<u8>, path: &Path) -> Result<SavedClustered, BakeError> {
     let bad = |what: &'static str| corrupt(path, what);
-    let (data, version) = open(path, true, 40)?;
+    let (data, version) = checked(data, path, true, 40)?;
     let body = &data[..data.len() - 8];
     let mut c = Cursor { data: body, at: 16 };
     let fingerprint = c.u64();
@@ -570,6 +604,14 @@ fn write_atomically(
         path: path.display().to_string(),
         source,
     };
+    // A rename would put the checkpoint in place of a device or a directory (as root, of
+    // /dev/zero itself).
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
+        return Err(io(std::io::Error::other(
+            "not a regular file: a checkpoint is written only to a file or a new path",
+        ))
+        .into());
+    }
     static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
     let n_tmp = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let name = path
@@ -728,10 +770,8 @@ mod tests {
         let at = 16 + 40 + 4 * 8 + 4 + 4;
         data[15] = VERSION_CLUSTERED_FLAGS;
         data[at..at + 3].copy_from_slice(&[1, 0, 0]);
-        let body = data.len() - 8;
-        let mut h = Fnv::new();
-        h.bytes(&data[..body]);
-        data[body..].copy_from_slice(&h.0.to_le_bytes());
+        data.truncate(data.len() - 8);
+        seal(&mut data);
         std::fs::write(&path, &data).expect("rewritten");
         let old = read_clustered(&path).expect("a version-3 file is read");
         assert_eq!(old.live, [0, 9, 9]);
@@ -746,5 +786,64 @@ mod tests {
             ),
             "{bad:?}"
         );
+    }
+
+    #[test]
+    fn bytes_read_as_the_file_and_a_device_is_neither_read_nor_replaced() {
+        let path = std::env::temp_dir().join(format!("radiant-bytes-{}.ckpt", std::process::id()));
+        let rows = Rows {
+            row: vec![0, 1, 1],
+            src: vec![1],
+            ff: vec![0.5],
+        };
+        let rr = RowsRef {
+            row: &rows.row,
+            src: &rows.src,
+            ff: &rows.ff,
+        };
+        let b = [[0.1; 3], [0.2; 3]];
+        write_clustered(&path, 7, 0.02, rr, (&[9, 9], &b), None).expect("write");
+        let mut data = std::fs::read(&path).expect("written");
+        let from_file = read_clustered(&path).expect("read");
+        let _ = std::fs::remove_file(&path);
+        assert_eq!(
+            read_clustered_from(data.clone(), &path).expect("bytes"),
+            from_file
+        );
+        // Sealing the body again gives the same checksum; a flipped byte fails it.
+        data.truncate(data.len() - 8);
+        let mut sealed = data.clone();
+        seal(&mut sealed);
+        assert_eq!(
+            read_clustered_from(sealed.clone(), &path).expect("sealed"),
+            from_file
+        );
+        sealed[20] ^= 1;
+        assert!(matches!(
+            read_clustered_from(sealed, &path),
+            Err(BakeError::Checkpoint(CheckpointError::Damaged { .. }))
+        ));
+        // A device is refused unread, and never replaced by a write.
+        for device in ["/dev/zero", "/dev/urandom"] {
+            let device = Path::new(device);
+            assert!(matches!(
+                read_clustered(device),
+                Err(BakeError::Checkpoint(CheckpointError::Io { .. }))
+            ));
+            assert!(matches!(
+                read(device),
+                Err(BakeError::Checkpoint(CheckpointError::Io { .. }))
+            ));
+        }
+        let dir = std::env::temp_dir().join(format!("radiant-ckdir-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let wrote = write_clustered(&dir, 7, 0.02, rr, (&[9, 9], &b), None);
+        assert!(
+            matches!(&wrote, Err(BakeError::Checkpoint(CheckpointError::Io { source, .. }))
+                if source.to_string().contains("not a regular file")),
+            "{wrote:?}"
+        );
+        assert!(dir.is_dir());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

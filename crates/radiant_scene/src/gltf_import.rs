@@ -13,12 +13,16 @@ use crate::{
     AlphaMode, Camera, Image, Light, LightKind, Scene, SceneError, Surface, TextureRef, Triangle,
 };
 
+/// The most bytes a `.gltf` or `.glb` file may have (4 GiB, the GLB format's own limit).
+pub const MAX_GLTF_FILE: u64 = u32::MAX as u64;
+
 /// Loads a `.gltf` (with external or embedded buffers) or `.glb` file.
 pub fn load_gltf(path: &Path) -> Result<Scene, SceneError> {
-    let bytes = std::fs::read(path).map_err(|e| SceneError::Io {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    })?;
+    let bytes =
+        crate::read_regular_file(path, MAX_GLTF_FILE).map_err(|message| SceneError::Io {
+            path: path.display().to_string(),
+            message,
+        })?;
     load(&bytes, path.parent())
 }
 
@@ -57,6 +61,7 @@ fn load(bytes: &[u8], base: Option<&Path>) -> Result<Scene, SceneError> {
         gltf::Gltf::from_slice_without_validation(bytes).map_err(parse_error)?;
     let json = document.into_json();
     check_attribute_indices(&json)?;
+    check_image_sources(&json)?;
     let document = gltf::Document::from_json(json).map_err(parse_error)?;
     check_uris(&document)?;
     if let Some(dir) = base {
@@ -522,6 +527,24 @@ fn check_attribute_indices(json: &gltf::json::Root) -> Result<(), SceneError> {
                 )));
             }
         }
+    }
+    Ok(())
+}
+
+/// An image's source as glTF 2.0 requires it: a `uri` or a `bufferView`, not both, and a
+/// `bufferView` with its `mimeType`. The `gltf` crate unwraps both (found by fuzzing: an
+/// image from a buffer view without a MIME type panicked there).
+fn check_image_sources(json: &gltf::json::Root) -> Result<(), SceneError> {
+    for (i, image) in json.images.iter().enumerate() {
+        let what = match (&image.uri, &image.buffer_view, &image.mime_type) {
+            (Some(_), None, _) | (None, Some(_), Some(_)) => continue,
+            (None, None, _) => "has neither a uri nor a bufferView",
+            (Some(_), Some(_), _) => "has both a uri and a bufferView",
+            (None, Some(_), None) => "has a bufferView but no mimeType",
+        };
+        return Err(SceneError::Invalid(format!(
+            "images[{i}] {what}, which glTF 2.0 does not allow"
+        )));
     }
     Ok(())
 }

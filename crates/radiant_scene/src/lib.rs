@@ -494,6 +494,39 @@ impl Scene {
     }
 }
 
+/// Reads a file a user named, refusing what would be read without end or past a budget: a
+/// device or a pipe (`/dev/zero`, `/dev/urandom`, a FIFO) and a file of more than `max_bytes`.
+/// Every input Radiant reads from a path goes through it.
+///
+/// # Errors
+/// A sentence that says what is wrong, for the caller's typed error (which names the file).
+pub fn read_regular_file(path: &std::path::Path, max_bytes: u64) -> Result<Vec<u8>, String> {
+    use std::io::Read;
+    // Asked before opening: opening a pipe would wait for a writer.
+    let meta = std::fs::metadata(path).map_err(|e| format!("cannot read it: {e}"))?;
+    if !meta.is_file() {
+        return Err(
+            "not a regular file (a device or a pipe would be read without end)".to_string(),
+        );
+    }
+    if meta.len() > max_bytes {
+        return Err(format!(
+            "{} bytes is more than this input may have ({max_bytes})",
+            meta.len()
+        ));
+    }
+    let file = std::fs::File::open(path).map_err(|e| format!("cannot read it: {e}"))?;
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    // One byte over the budget tells a file that grew while it was read.
+    file.take(max_bytes.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(|e| format!("cannot read it: {e}"))?;
+    if bytes.len() as u64 > max_bytes {
+        return Err(format!("it grew past {max_bytes} bytes while it was read"));
+    }
+    Ok(bytes)
+}
+
 /// Loads a builtin scene by name (see [`BUILTIN_NAMES`]).
 pub fn builtin(name: &str) -> Result<Scene, SceneError> {
     Builtin::parse(name)
@@ -504,6 +537,30 @@ pub fn builtin(name: &str) -> Result<Scene, SceneError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn only_regular_files_within_the_budget_are_read() {
+        let dir = std::env::temp_dir().join(format!("radiant-regular-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let file = dir.join("a.txt");
+        std::fs::write(&file, b"0123456789").expect("write");
+        assert_eq!(read_regular_file(&file, 10).expect("reads"), b"0123456789");
+        let over = read_regular_file(&file, 9).expect_err("over the budget");
+        assert!(over.contains("more than this input may have (9)"), "{over}");
+        for device in ["/dev/zero", "/dev/urandom"] {
+            let e = read_regular_file(std::path::Path::new(device), u64::MAX).expect_err(device);
+            assert!(e.contains("not a regular file"), "{e}");
+        }
+        // A pipe is refused without being opened (opening it would wait for a writer).
+        let fifo = dir.join("pipe");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        assert!(made.expect("mkfifo runs").success());
+        let e = read_regular_file(&fifo, u64::MAX).expect_err("a pipe");
+        assert!(e.contains("not a regular file"), "{e}");
+        assert!(read_regular_file(&dir, u64::MAX).is_err(), "a directory");
+        assert!(read_regular_file(&dir.join("missing"), u64::MAX).is_err());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn cornell_box_matches_the_published_data() {

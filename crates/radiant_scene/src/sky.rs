@@ -205,56 +205,160 @@ fn rgb(s: &str) -> Option<[f64; 3]> {
     }
 }
 
+/// The most texels a sky image may have (16384 × 8192): its linear RGB takes 1.5 GiB.
+pub const SKY_MAX_TEXELS: u64 = 16384 * 8192;
+
+/// The most bytes a sky image file may have: an uncompressed float EXR of
+/// [`SKY_MAX_TEXELS`] RGBA texels, with room for its headers.
+const SKY_MAX_FILE: u64 = SKY_MAX_TEXELS * 16 + (1 << 20);
+
 fn load_image(path: &str, scale: f64, base: Option<&Path>) -> Result<Sky, SceneError> {
-    if !scale.is_finite() || scale < 0.0 {
-        return Err(SceneError::InvalidSky(format!(
-            "scale {scale} is negative or not finite"
-        )));
-    }
     let full = match base {
         Some(dir) if Path::new(path).is_relative() => dir.join(path),
         _ => Path::new(path).to_path_buf(),
     };
-    let img = image::open(&full).map_err(|e| SceneError::Texture {
-        image: full.display().to_string(),
-        what: match e {
-            image::ImageError::IoError(io) => format!("cannot read it: {io}"),
-            other => format!("cannot decode it: {other}"),
-        },
-    })?;
-    let rgb = img.to_rgb32f();
-    let (width, height) = rgb.dimensions();
-    let texels: Vec<[f32; 3]> = rgb
-        .pixels()
-        .map(|p| p.0.map(|v| v * scale as f32))
-        .collect();
-    if let Some(v) = texels
-        .iter()
-        .flatten()
-        .find(|v| !v.is_finite() || **v < 0.0)
-    {
-        return Err(SceneError::InvalidSky(format!(
-            "{}: texel value {v} is negative or not finite",
-            full.display()
-        )));
+    let name = full.display().to_string();
+    let bytes =
+        crate::read_regular_file(&full, SKY_MAX_FILE).map_err(|what| SceneError::Texture {
+            image: name.clone(),
+            what,
+        })?;
+    Sky::from_image_bytes(&name, &bytes, scale)
+}
+
+impl Sky {
+    /// Decodes an equirectangular sky image (Radiance `.hdr` or OpenEXR, recognised by its
+    /// bytes) held in memory, times `scale`; `name` labels it in errors and in
+    /// [`SkyImage::path`]. Sizes are checked from the header before any texel is decoded.
+    ///
+    /// # Errors
+    /// [`SceneError::Texture`] when the bytes are not an image or cannot be decoded,
+    /// [`SceneError::InvalidSky`] for a negative or non-finite scale or texel, an empty image, or
+    /// one over [`SKY_MAX_TEXELS`].
+    pub fn from_image_bytes(name: &str, bytes: &[u8], scale: f64) -> Result<Sky, SceneError> {
+        Self::from_image_bytes_within(name, bytes, scale, SKY_MAX_TEXELS)
     }
-    if width == 0 || height == 0 {
-        return Err(SceneError::InvalidSky(format!(
-            "{}: empty image",
-            full.display()
-        )));
+
+    /// [`Sky::from_image_bytes`] with at most `max_texels` texels (and decoder allocations
+    /// in proportion), as a tighter memory budget asks.
+    pub fn from_image_bytes_within(
+        name: &str,
+        bytes: &[u8],
+        scale: f64,
+        max_texels: u64,
+    ) -> Result<Sky, SceneError> {
+        if !scale.is_finite() || scale < 0.0 {
+            return Err(SceneError::InvalidSky(format!(
+                "scale {scale} is negative or not finite"
+            )));
+        }
+        let undecodable = |e: image::ImageError| SceneError::Texture {
+            image: name.to_string(),
+            what: format!("cannot decode it: {e}"),
+        };
+        let reader = || -> Result<_, SceneError> {
+            let mut r = image::ImageReader::new(std::io::Cursor::new(bytes))
+                .with_guessed_format()
+                .map_err(|e| undecodable(image::ImageError::IoError(e)))?;
+            let mut limits = image::Limits::default();
+            limits.max_alloc = Some(max_texels * 32 + (64 << 20));
+            r.limits(limits);
+            Ok(r)
+        };
+        let (width, height) = reader()?.into_dimensions().map_err(undecodable)?;
+        if width == 0 || height == 0 {
+            return Err(SceneError::InvalidSky(format!("{name}: empty image")));
+        }
+        if u64::from(width) * u64::from(height) > max_texels {
+            return Err(SceneError::InvalidSky(format!(
+                "{name}: {width}×{height} texels is more than a sky image may have ({max_texels})"
+            )));
+        }
+        let img = reader()?.decode().map_err(undecodable)?;
+        let rgb = img.to_rgb32f();
+        let (width, height) = rgb.dimensions();
+        let texels: Vec<[f32; 3]> = rgb
+            .pixels()
+            .map(|p| p.0.map(|v| v * scale as f32))
+            .collect();
+        if let Some(v) = texels
+            .iter()
+            .flatten()
+            .find(|v| !v.is_finite() || **v < 0.0)
+        {
+            return Err(SceneError::InvalidSky(format!(
+                "{name}: texel value {v} is negative or not finite"
+            )));
+        }
+        if width == 0 || height == 0 {
+            return Err(SceneError::InvalidSky(format!("{name}: empty image")));
+        }
+        Ok(Sky::Image(SkyImage {
+            path: name.to_string(),
+            width,
+            height,
+            texels: texels.into(),
+        }))
     }
-    Ok(Sky::Image(SkyImage {
-        path: full.display().to_string(),
-        width,
-        height,
-        texels: texels.into(),
-    }))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A flat (not run-length) Radiance RGBE image, every texel `(m, m, m)` × 2^(e − 136).
+    fn rgbe(width: u32, height: u32, m: u8, e: u8) -> Vec<u8> {
+        let mut b =
+            format!("#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y {height} +X {width}\n").into_bytes();
+        for _ in 0..width * height {
+            b.extend_from_slice(&[m, m, m, e]);
+        }
+        b
+    }
+
+    #[test]
+    fn sky_images_decode_from_bytes_within_their_limit() {
+        let bytes = rgbe(8, 4, 128, 129);
+        let Sky::Image(img) = Sky::from_image_bytes("flat.hdr", &bytes, 2.0).expect("decodes")
+        else {
+            panic!("not an image sky");
+        };
+        assert_eq!((img.width, img.height), (8, 4));
+        // 128 × 2^(129 − 136) = 1, times the scale.
+        assert!(img.texels.iter().flatten().all(|&v| (v - 2.0).abs() < 1e-6));
+        let e = Sky::from_image_bytes_within("flat.hdr", &bytes, 1.0, 31).expect_err("32 > 31");
+        assert!(
+            matches!(e, SceneError::InvalidSky(ref w) if w.contains("8×4")),
+            "{e}"
+        );
+        for scale in [-1.0, f64::NAN, f64::INFINITY] {
+            assert!(matches!(
+                Sky::from_image_bytes("flat.hdr", &bytes, scale),
+                Err(SceneError::InvalidSky(_))
+            ));
+        }
+        assert!(matches!(
+            Sky::from_image_bytes("junk.hdr", b"not an image", 1.0),
+            Err(SceneError::Texture { .. })
+        ));
+        // A header that promises more texels than the bytes hold.
+        assert!(Sky::from_image_bytes("short.hdr", &bytes[..bytes.len() - 9], 1.0).is_err());
+    }
+
+    #[test]
+    fn a_sky_file_that_is_a_device_is_refused_unread() {
+        let dir = std::env::temp_dir().join(format!("radiant-sky-dev-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let link = dir.join("sky.hdr");
+        let _ = std::fs::remove_file(&link);
+        std::os::unix::fs::symlink("/dev/zero", &link).expect("symlink");
+        let e = Sky::parse(&link.display().to_string(), None).expect_err("a device");
+        assert!(
+            matches!(e, SceneError::Texture { ref what, .. } if what.contains("not a regular file")),
+            "{e}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn parses_the_cli_forms() {
