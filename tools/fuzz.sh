@@ -52,7 +52,8 @@ fuzz() {
     ulimit -v $((6 * 1024 * 1024))
     "$BIN/$t" "$corpus" $(seeds "$t") \
       -max_total_time="$secs" -timeout=10 -rss_limit_mb=2048 -malloc_limit_mb=2048 \
-      -max_len=65536 -print_final_stats=1 -artifact_prefix="fuzz/artifacts/$t/" ${FUZZ_ARGS:-}
+      -max_len=65536 -print_final_stats=1 -artifact_prefix="fuzz/artifacts/$t/" \
+      $([ -f "fuzz/dicts/$t.dict" ] && echo "-dict=fuzz/dicts/$t.dict") ${FUZZ_ARGS:-}
   )
 }
 
