@@ -20,7 +20,8 @@ use crate::output::{csv_name, ensure_dir, exr_bytes, preview_png, write_atomic};
 pub(crate) struct ReferenceArgs {
     #[command(flatten)]
     pub(crate) scene: SceneArgs,
-    /// Output directory: surfaces.csv, points.csv, image.exr (+ image.png), report.json.
+    /// Output directory: surfaces.csv, points.csv, probes.csv, image.exr (+ image.png),
+    /// report.json.
     #[arg(long, short)]
     pub(crate) out: PathBuf,
     /// Paths per surface, point and pixel. Alone, exactly that many (bit-identical on any
@@ -47,6 +48,12 @@ pub(crate) struct ReferenceArgs {
     /// scene in metres). Written to points.csv.
     #[arg(long)]
     pub(crate) points: Option<PathBuf>,
+    /// Probes to estimate irradiance at: a CSV with `name,x,y,z,nx,ny,nz` (scene units; a point
+    /// anywhere, in free space or on a surface, and the normal of the hemisphere it gathers
+    /// over, any length but zero). Written to probes.csv: `name,E_r,E_g,E_b` (W/m² in the
+    /// scene's emission units, cosine-weighted over the hemisphere) and standard errors.
+    #[arg(long)]
+    pub(crate) probes: Option<PathBuf>,
     /// Also render the scene's camera at this size, e.g. 640x360: image.exr (linear radiance,
     /// what `radiant render --reference-image` compares with) and image.png.
     #[arg(long)]
@@ -113,8 +120,8 @@ fn parse_image_size(s: &str) -> anyhow::Result<(u32, u32)> {
 
 /// Reads a points CSV in scene units (`x,y,z`) or the Mitsuba layout in millimetres, as
 /// `radiant bake --points` reads it (`metrics::parse_point_positions`).
-fn read_points(path: &Path) -> anyhow::Result<Vec<Point>> {
-    let text = crate::common::read_text(path, "--points")?;
+fn read_points(path: &Path, flag: &str) -> anyhow::Result<Vec<Point>> {
+    let text = crate::common::read_text(path, flag)?;
     let specs = radiant::radiosity::metrics::parse_point_positions(&text, 1e-3)
         .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     Ok(specs
@@ -212,6 +219,26 @@ fn points_csv(points: &[Point], est: &[Estimate]) -> String {
     s
 }
 
+/// `probes.csv`: irradiance per probe with its standard errors, in the order given.
+fn probes_csv(probes: &[Point], est: &[Estimate]) -> String {
+    let mut s = String::from("name,E_r,E_g,E_b,se_r,se_g,se_b,samples\n");
+    for (p, e) in probes.iter().zip(est) {
+        let _ = writeln!(
+            s,
+            "{},{:.9e},{:.9e},{:.9e},{:.4e},{:.4e},{:.4e},{}",
+            csv_name(&p.name),
+            e.mean[0],
+            e.mean[1],
+            e.mean[2],
+            e.se[0],
+            e.se[1],
+            e.se[2],
+            e.samples
+        );
+    }
+    s
+}
+
 /// The per-surface estimate, with a progress bar.
 pub(crate) fn trace_surfaces(
     tracer: &Tracer,
@@ -232,10 +259,15 @@ pub fn run(args: &ReferenceArgs) -> anyhow::Result<()> {
     }
     let params = args.params()?;
     let image_size = args.image.as_deref().map(parse_image_size).transpose()?;
-    let points = args.points.as_deref().map(read_points).transpose()?;
+    let points = (args.points.as_deref())
+        .map(|p| read_points(p, "--points"))
+        .transpose()?;
+    let probes = (args.probes.as_deref())
+        .map(|p| read_points(p, "--probes"))
+        .transpose()?;
     anyhow::ensure!(
-        !args.no_surfaces || image_size.is_some() || points.is_some(),
-        "--no-surfaces leaves nothing to do: add --image or --points"
+        !args.no_surfaces || image_size.is_some() || points.is_some() || probes.is_some(),
+        "--no-surfaces leaves nothing to do: add --image, --points or --probes"
     );
     let (scene, source) = load_scene(&args.scene)?;
     ensure_dir(&args.out)?;
@@ -305,6 +337,28 @@ pub fn run(args: &ReferenceArgs) -> anyhow::Result<()> {
         let mut j = run_json(&r);
         j["count"] = json!(points.len());
         report["points"] = j;
+    }
+    if let Some(probes) = &probes {
+        let (pb, progress) = progress_reporter("probes");
+        let result = tracer.probes(probes, &params, &progress);
+        pb.finish_and_clear();
+        let (est, r) = result?;
+        write_atomic(
+            &args.out.join("probes.csv"),
+            probes_csv(probes, &est).as_bytes(),
+        )?;
+        println!(
+            "probes: {} probes, {} paths in {:.2} s, worst se {:.3} % (stopped by {})",
+            probes.len(),
+            r.paths,
+            r.seconds,
+            100.0 * r.rel_error,
+            r.stopped.name()
+        );
+        let mut j = run_json(&r);
+        j["count"] = json!(probes.len());
+        j["units"] = json!("irradiance E, W/m² in the scene's emission units");
+        report["probes"] = j;
     }
     if let Some((w, h)) = image_size {
         let camera = scene

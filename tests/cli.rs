@@ -198,6 +198,8 @@ fn bad_input_gives_one_line_and_nonzero_exit() {
         .status()
         .expect("mkfifo runs");
     assert!(made.success());
+    let zero_normal = fifo_dir.join("zero_normal.csv");
+    std::fs::write(&zero_normal, "name,x,y,z,nx,ny,nz\np,0.2,0.2,0.2,0,0,0\n").expect("csv");
     let cases: Vec<Vec<String>> = vec![
         vec![
             "bake".into(),
@@ -269,6 +271,15 @@ fn bad_input_gives_one_line_and_nonzero_exit() {
             "8".into(),
             "--points".into(),
             "/dev/zero".into(),
+        ],
+        vec![
+            "reference".into(),
+            "--builtin".into(),
+            "cornell-box".into(),
+            "--samples".into(),
+            "8".into(),
+            "--probes".into(),
+            zero_normal.display().to_string(),
         ],
         vec![
             "reference".into(),
@@ -609,6 +620,16 @@ fn reference_writes_surfaces_points_image_and_a_report_the_bake_reads() {
     let points = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("assets/reference/cornell_points_rgb_mitsuba.csv");
     let points = points.display().to_string();
+    // Probes in the box's free space: under the light facing it and facing the floor, and
+    // facing a wall with a normal that is not unit.
+    std::fs::create_dir_all(&out).expect("out");
+    let probes = out.join("probes_in.csv");
+    std::fs::write(
+        &probes,
+        "name,x,y,z,nx,ny,nz\nup,0.278,0.3,0.28,0,1,0\ndown,0.278,0.3,0.28,0,-1,0\nred wall,0.278,0.3,0.28,3,0,0\n",
+    )
+    .expect("probes");
+    let probes = probes.display().to_string();
     let common = [
         "reference",
         "--builtin",
@@ -619,6 +640,8 @@ fn reference_writes_surfaces_points_image_and_a_report_the_bake_reads() {
         "32x24",
         "--points",
         &points,
+        "--probes",
+        &probes,
     ];
     let stdout = run_ok(&[&common[..], &["--threads", "1"]].concat(), &out);
     assert!(stdout.contains("stopped by samples"), "{stdout}");
@@ -637,6 +660,29 @@ fn reference_writes_surfaces_points_image_and_a_report_the_bake_reads() {
     }
     let pts = std::fs::read_to_string(out.join("points.csv")).expect("points.csv");
     assert_eq!(pts.lines().count(), 25, "a header and 24 points");
+    let probes = std::fs::read_to_string(out.join("probes.csv")).expect("probes.csv");
+    let mut lines = probes.lines();
+    assert_eq!(
+        lines.next(),
+        Some("name,E_r,E_g,E_b,se_r,se_g,se_b,samples")
+    );
+    let e: Vec<(String, [f64; 3])> = lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            let v = |i: usize| f[i].parse::<f64>().expect("number");
+            assert_eq!(f[7], "512", "{l}");
+            (f[0].to_string(), [v(1), v(2), v(3)])
+        })
+        .collect();
+    assert_eq!(e.len(), 3);
+    assert!(
+        e.iter().flat_map(|p| p.1).all(|v| v.is_finite() && v > 0.0),
+        "{e:?}"
+    );
+    // Facing the light is brighter than facing the floor; facing +x, the red wall (x = 0.556;
+    // the green one is at x = 0) fills most of the hemisphere.
+    assert!(e[0].1[0] > 2.0 * e[1].1[0], "{e:?}");
+    assert!(e[2].1[0] > 1.5 * e[2].1[1], "the red wall: {e:?}");
     let img = image::open(out.join("image.exr"))
         .expect("image.exr")
         .to_rgb32f();
@@ -653,7 +699,7 @@ fn reference_writes_surfaces_points_image_and_a_report_the_bake_reads() {
     // The same sample count on two threads: the same bytes.
     let out2 = tmp("reference2");
     run_ok(&[&common[..], &["--threads", "2"]].concat(), &out2);
-    for f in ["surfaces.csv", "points.csv", "image.exr"] {
+    for f in ["surfaces.csv", "points.csv", "probes.csv", "image.exr"] {
         assert_eq!(
             std::fs::read(out.join(f)).expect("1 thread"),
             std::fs::read(out2.join(f)).expect("2 threads"),

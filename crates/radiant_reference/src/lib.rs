@@ -74,6 +74,16 @@ pub enum ReferenceError {
         /// Its name.
         name: String,
     },
+    /// A probe with a non-finite position, or a normal that is zero or not finite.
+    #[error("probe {index} ('{name}'): {what}")]
+    InvalidProbe {
+        /// Index in the list given.
+        index: usize,
+        /// Its name.
+        name: String,
+        /// What is wrong.
+        what: &'static str,
+    },
     /// An image needs a camera.
     #[error("the scene has no camera")]
     NoCamera,
@@ -274,14 +284,16 @@ pub fn mean_rel_error(surfaces: &[SurfaceEstimate]) -> f64 {
     if area > 0.0 { rel / area } else { 0.0 }
 }
 
-/// A point to estimate radiosity at, in scene units.
+/// A point to estimate radiosity at ([`Tracer::points`]), or irradiance at
+/// ([`Tracer::probes`]), in scene units.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Point {
     /// A name for reports.
     pub name: String,
-    /// On (or within 0.5 % of the scene's radius of) a surface.
+    /// For [`Tracer::points`], on (or within 0.5 % of the scene's radius of) a surface; for
+    /// [`Tracer::probes`], anywhere.
     pub position: DVec3,
-    /// The surface's normal there (its front side).
+    /// The surface's normal there (its front side), or the probe's.
     pub normal: DVec3,
 }
 
@@ -301,6 +313,7 @@ const MIN_CHUNKS: u64 = 16;
 const KIND_SURFACES: u64 = 1;
 const KIND_POINTS: u64 = 2;
 const KIND_PIXELS: u64 = 3;
+const KIND_PROBES: u64 = 4;
 
 impl Tracer {
     /// Mean outgoing radiance of every surface that has triangles of positive area, in the
@@ -392,6 +405,67 @@ impl Tracer {
                 progress,
             },
         )
+    }
+
+    /// Irradiance at each probe (`E = ∫ L cos θ dω` over the hemisphere about its normal, in
+    /// W/m² of the scene's emission units: a surface of reflectance ρ there would reflect
+    /// ρ·E/π). A probe is a point anywhere in the scene, in free space or on a surface, with
+    /// a normal of any length but zero ([`Point`]'s `normal` need not be unit here). Each
+    /// sample is the path [`Tracer::points`] starts at a surface point: the emitters by light
+    /// sampling, the punctual lights with a shadow ray, and a cosine-weighted bounce into the
+    /// scene or the sky. A probe inside closed geometry meets back faces only and reads 0.
+    pub fn probes(
+        &self,
+        probes: &[Point],
+        params: &Params,
+        progress: &(dyn Fn(&Progress) + Sync),
+    ) -> Result<(Vec<Estimate>, Run), ReferenceError> {
+        let local: Vec<(DVec3, DVec3)> = probes
+            .iter()
+            .enumerate()
+            .map(|(index, p)| {
+                let bad = |what| ReferenceError::InvalidProbe {
+                    index,
+                    name: p.name.clone(),
+                    what,
+                };
+                if !p.position.is_finite() {
+                    return Err(bad("its position is not finite"));
+                }
+                let n = p
+                    .normal
+                    .try_normalize()
+                    .ok_or_else(|| bad("its normal is zero or not finite"))?;
+                let x = self.frame.to_local(p.position);
+                // The local frame holds the scene in the unit sphere; the rays are f32.
+                if x.length() > 1e6 {
+                    return Err(bad("it is over a million scene radii from the scene"));
+                }
+                Ok((x, n))
+            })
+            .collect::<Result<_, _>>()?;
+        let (mut estimates, run) = progressive::run(
+            params,
+            Job {
+                items: local.len(),
+                kind: KIND_PROBES,
+                chunk: 256,
+                rule: Rule::PerItem,
+                min_chunks: MIN_CHUNKS,
+                what: "probes",
+                sample: |i: usize, rng: &mut rng::Rng, rays: &mut u64| {
+                    let (x, n) = local[i];
+                    self.reflected(x, n, rng, rays)
+                },
+                progress,
+            },
+        )?;
+        // The paths estimate E/π.
+        for e in &mut estimates {
+            e.mean = e.mean.map(|m| m * std::f64::consts::PI);
+            e.se = e.se.map(|m| m * std::f64::consts::PI);
+        }
+        Ok((estimates, run))
     }
 
     /// The radiance `camera` sees, `width × height` pixels, each the mean over its area (box

@@ -473,3 +473,112 @@ fn cornell_box_image_agrees_with_mitsuba_within_noise() {
     );
     assert!(bias.abs() <= 4.0, "image sum off by {bias} σ");
 }
+
+/// Probes: irradiance at points anywhere, for any normal.
+fn probe(name: &str, position: DVec3, normal: DVec3) -> Point {
+    Point {
+        name: name.into(),
+        position,
+        normal,
+    }
+}
+
+#[test]
+fn a_probe_in_a_furnace_reads_pi_e_over_one_minus_rho_for_every_normal() {
+    let (rho, e) = (0.5, 1.0);
+    let scene = furnace(rho, e);
+    let tracer = Tracer::new(&scene).expect("furnace");
+    // Inside the furnace cube: its centre and a point near a corner, along the six axes and a
+    // tilted normal of length 3 (a probe's normal need not be unit).
+    let (lo, hi) = scene.triangles.iter().flat_map(|t| t.vertices).fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), v| (lo.min(v), hi.max(v)),
+    );
+    let normals = [
+        DVec3::X,
+        DVec3::NEG_X,
+        DVec3::Y,
+        DVec3::NEG_Y,
+        DVec3::Z,
+        DVec3::NEG_Z,
+        DVec3::new(1.0, 2.0, -2.0),
+    ];
+    let mut probes = Vec::new();
+    for (k, at) in [0.5, 0.1].into_iter().enumerate() {
+        for (j, n) in normals.iter().enumerate() {
+            probes.push(probe(&format!("{k}/{j}"), lo + (hi - lo) * at, *n));
+        }
+    }
+    let (est, run) = tracer
+        .probes(&probes, &samples(8_000), &quiet)
+        .expect("trace");
+    assert_eq!(run.paths, 8_000 * probes.len() as u64);
+    let want = PI * e / (1.0 - rho);
+    for (p, e) in probes.iter().zip(&est) {
+        within(e, [want; 3], 4.0, &p.name);
+        assert!(e.rel_error() < 0.02, "{}: {e:?}", p.name);
+    }
+}
+
+#[test]
+fn a_probe_under_a_point_light_reads_the_inverse_square_and_its_shadow() {
+    // Probes 0.5 above the floor, facing up (nothing above but the light): E = I cos θ / d²
+    // exactly, no noise; under the occluder (height 1, |x| < 0.5 shadows |x| < 0.75 here) 0.
+    let xs = [0.0, 0.5, 1.0, 1.5];
+    let probes: Vec<Point> = xs
+        .iter()
+        .map(|&x| probe(&format!("x={x}"), DVec3::new(x, 0.5, 0.0), DVec3::Y * 2.0))
+        .collect();
+    for occluder in [false, true] {
+        let tracer = Tracer::new(&lit_floor(occluder)).expect("scene");
+        let (est, _) = tracer
+            .probes(&probes, &samples(256), &quiet)
+            .expect("trace");
+        for (x, e) in xs.iter().zip(&est) {
+            let d = (x * x + 1.5f64 * 1.5).sqrt();
+            let shadowed = occluder && *x < 0.75;
+            let irr = if shadowed {
+                0.0
+            } else {
+                100.0 * 1.5 / (d * d * d)
+            };
+            for (c, colour) in [1.0, 0.5, 0.25].into_iter().enumerate() {
+                let want = irr * colour;
+                assert!(
+                    (e.mean[c] - want).abs() <= 1e-9 * want.max(1.0),
+                    "occluder {occluder}, x {x}: {:?} vs {irr} × colour",
+                    e.mean
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn bad_probes_are_typed_errors() {
+    let tracer = Tracer::new(&lit_floor(false)).expect("scene");
+    for (p, what) in [
+        (probe("zero", DVec3::Y, DVec3::ZERO), "normal"),
+        (
+            probe("nan", DVec3::Y, DVec3::new(f64::NAN, 1.0, 0.0)),
+            "normal",
+        ),
+        (
+            probe("inf", DVec3::new(f64::INFINITY, 0.0, 0.0), DVec3::Y),
+            "position",
+        ),
+        (
+            probe("remote", DVec3::new(1e12, 0.0, 0.0), DVec3::Y),
+            "million",
+        ),
+    ] {
+        let e = tracer
+            .probes(std::slice::from_ref(&p), &samples(16), &quiet)
+            .expect_err(&p.name);
+        assert!(
+            matches!(&e, ReferenceError::InvalidProbe { index: 0, name, .. } if *name == p.name)
+                && e.to_string().contains(what),
+            "{e}"
+        );
+    }
+}
