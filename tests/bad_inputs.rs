@@ -86,6 +86,18 @@ const CASES: &[(&str, Expect)] = &[
         |e| matches!(e, SceneError::Invalid(what) if what.contains("images[0]")),
     ),
     (
+        "texcoord_u32.gltf",
+        |e| matches!(e, SceneError::Invalid(what) if what.contains("TEXCOORD_0 accessor 2")),
+    ),
+    (
+        "texcoord_vec3.gltf",
+        |e| matches!(e, SceneError::Invalid(what) if what.contains("TEXCOORD_0 accessor 2")),
+    ),
+    (
+        "normal_u8.gltf",
+        |e| matches!(e, SceneError::Invalid(what) if what.contains("NORMAL accessor 2")),
+    ),
+    (
         "image_uri_and_view.gltf",
         |e| matches!(e, SceneError::Invalid(what) if what.contains("images[0] has both")),
     ),

@@ -199,6 +199,20 @@ def image_source(**image):
 
 
 case("image_view_without_mime.gltf", mutated(image_source(bufferView=2)))
+
+
+def texcoords(component_type, kind, attribute="TEXCOORD_0"):
+    # Found by fuzzing: texture coordinates of UNSIGNED_INT reached `unreachable!` in the gltf
+    # crate's reader. The quad's positions serve as the attribute's bytes.
+    def apply(d):
+        d["accessors"].append({"bufferView": 0, "componentType": component_type, "count": 4, "type": kind})
+        d["meshes"][0]["primitives"][0]["attributes"][attribute] = len(d["accessors"]) - 1
+    return apply
+
+
+case("texcoord_u32.gltf", mutated(texcoords(5125, "VEC2")))
+case("texcoord_vec3.gltf", mutated(texcoords(5126, "VEC3")))
+case("normal_u8.gltf", mutated(texcoords(5121, "VEC3", "NORMAL")))
 case("image_without_source.gltf", mutated(image_source(name="nothing")))
 case("image_uri_and_view.gltf", mutated(image_source(bufferView=2, mimeType="image/png", uri="t.png")))
 

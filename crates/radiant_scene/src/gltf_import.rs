@@ -835,6 +835,34 @@ impl Importer<'_> {
                     acc.index()
                 )));
             }
+            // Found by fuzzing: TEXCOORD_n of UNSIGNED_INT reached `unreachable!` in the reader.
+            if let Some(acc) = prim.get(&gltf::Semantic::Normals)
+                && !matches!(
+                    (acc.data_type(), acc.dimensions()),
+                    (DataType::F32, Dimensions::Vec3)
+                )
+            {
+                return Err(SceneError::Invalid(format!(
+                    "mesh '{name}': NORMAL accessor {} is not VEC3 FLOAT",
+                    acc.index()
+                )));
+            }
+            for set in 0..2 {
+                if let Some(acc) = prim.get(&gltf::Semantic::TexCoords(set))
+                    && !matches!(
+                        (acc.data_type(), acc.dimensions()),
+                        (
+                            DataType::F32 | DataType::U8 | DataType::U16,
+                            Dimensions::Vec2
+                        )
+                    )
+                {
+                    return Err(SceneError::Invalid(format!(
+                        "mesh '{name}': TEXCOORD_{set} accessor {} is not VEC2 of FLOAT, UNSIGNED_BYTE or UNSIGNED_SHORT",
+                        acc.index()
+                    )));
+                }
+            }
             if let Some(acc) = prim.indices()
                 && !matches!(
                     (acc.data_type(), acc.dimensions()),
