@@ -371,7 +371,7 @@ pub fn surface_means(
 
 /// The centroids of the `n²` equal sub-triangles of a triangle cut `n` times along each edge,
 /// as barycentric `(b1, b2)` (the weight of the first vertex is `1 − b1 − b2`).
-pub(crate) fn lattice(n: u32) -> impl Iterator<Item = (f64, f64)> {
+pub fn lattice(n: u32) -> impl Iterator<Item = (f64, f64)> {
     let f = f64::from(n);
     (0..n).flat_map(move |i| {
         (0..n - i).flat_map(move |j| {
