@@ -161,6 +161,14 @@ pub(crate) fn parse_texel_density(s: &str) -> Result<f64, String> {
     }
 }
 
+/// `--probe-spacing`: a positive, finite distance in scene units.
+pub(crate) fn parse_spacing(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(d) if d.is_finite() && d > 0.0 => Ok(d),
+        _ => Err(format!("{s:?} is not a positive distance in scene units")),
+    }
+}
+
 /// `4G`, `512M`, `64K` or a number of bytes.
 pub(crate) fn parse_size(s: &str) -> Result<u64, String> {
     let t = s.trim();

@@ -90,6 +90,8 @@ struct Job {
     atlas: Atlas,
     /// `--points` (located) and `--reference-points`.
     points: Option<crate::points::AskedPoints>,
+    /// `--probes` and `--reference-probes`.
+    probes: Option<crate::probes::AskedProbes>,
     start: Instant,
     import_s: f64,
     atlas_s: f64,
@@ -117,6 +119,10 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
             anyhow::ensure!(
                 args.points.is_none(),
                 "--points is not available with --method gpu-hemicube yet; bake with jacobi or gauss-seidel"
+            );
+            anyhow::ensure!(
+                args.probes.is_none(),
+                "--probes is not available with --method gpu-hemicube yet; bake with jacobi or gauss-seidel"
             );
             return crate::gather_cmd::bake(args);
         }
@@ -181,6 +187,16 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         )?),
         None => None,
     };
+    let probes = match &job.probes {
+        Some(p) => Some(crate::probes::write(
+            p,
+            &job.scene,
+            &result,
+            args.probe_spacing,
+            &args.out,
+        )?),
+        None => None,
+    };
     let total_s = job.start.elapsed().as_secs_f64();
     let mut report = report_json(args, &job, &result, &written, error.as_ref(), total_s);
     if let Some(shown) = &shown {
@@ -192,6 +208,9 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
     }
     if !spectral.is_null() {
         report["spectral"] = spectral;
+    }
+    if let Some((json, _)) = &probes {
+        report["probes"] = json.clone();
     }
     if let Some((c, smooth)) = &points {
         report["points_vs_path_traced"] = points_json(c);
@@ -222,6 +241,9 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         if let Some(line) = p.summary() {
             println!("{line}");
         }
+    }
+    if let Some((_, line)) = &probes {
+        println!("{line}");
     }
     Ok(())
 }
@@ -256,6 +278,10 @@ fn prepare(args: &BakeArgs, solver: SolverKind) -> anyhow::Result<Job> {
         )?),
         None => None,
     };
+    let probes = match &args.probes {
+        Some(p) => Some(crate::probes::read(p, args.reference_probes.as_deref())?),
+        None => None,
+    };
     ensure_dir(&args.out)?;
     let lap = Instant::now();
     let atlas = Atlas::paged(&scene, args.texel_density, args.lightmap_page)?;
@@ -278,6 +304,7 @@ fn prepare(args: &BakeArgs, solver: SolverKind) -> anyhow::Result<Job> {
         shipped: args.scene.shipped(),
         atlas,
         points,
+        probes,
         start,
         import_s,
         atlas_s,

@@ -6,6 +6,7 @@
 //! - [`radiosity`]: meshing, form factors, solvers, error metrics, light maps (pure CPU);
 //! - [`reference`](mod@reference): a progressive CPU path tracer over the same scene model, the reference the
 //!   bake's error is measured against;
+//! - [`probes`]: irradiance probes from the solution, for what moves (an irradiance volume);
 //! - [`color`]: sRGB transfer functions, CIE colorimetry and tone-map operators;
 //! - [`ecs`]: scenes as `bevy_ecs` entities, the background bake and live rebake, a headless app;
 //! - [`render`] and [`post`] (feature `render`, on by default): the wgpu render graph, passes,
@@ -28,6 +29,7 @@ pub use radiant_ecs as ecs;
 pub use radiant_gather as gather;
 #[cfg(feature = "render")]
 pub use radiant_post as post;
+pub use radiant_probes as probes;
 pub use radiant_radiosity as radiosity;
 pub use radiant_reference as reference;
 #[cfg(feature = "render")]

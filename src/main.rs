@@ -10,6 +10,7 @@ mod gather_cmd;
 mod output;
 mod plot;
 mod points;
+mod probes;
 mod reference_cmd;
 #[cfg(feature = "render")]
 mod render_cmd;
@@ -169,6 +170,20 @@ pub(crate) struct BakeArgs {
     /// bias in report.json and the summary.
     #[arg(long, value_name = "REF.csv", requires = "points")]
     pub(crate) reference_points: Option<PathBuf>,
+    /// Probe points (`name,x,y,z,nx,ny,nz`, scene units: a point anywhere and a normal): bakes
+    /// an irradiance volume with the level and writes probes.csv, `name,E_r,E_g,E_b`, what a
+    /// dynamic mesh there would receive from it (the layout `radiant reference --probes`
+    /// writes).
+    #[arg(long, value_name = "FILE.csv")]
+    pub(crate) probes: Option<PathBuf>,
+    /// A probes.csv written by `radiant reference --probes` to measure --probes against, by
+    /// name: median, mean and worst relative error in report.json and the summary.
+    #[arg(long, value_name = "REF.csv", requires = "probes")]
+    pub(crate) reference_probes: Option<PathBuf>,
+    /// Distance between the volume's probes, scene units (default: a sixteenth of the scene's
+    /// longest extent, coarser where more than 32 768 probes would be needed).
+    #[arg(long, value_name = "METRES", requires = "probes", value_parser = crate::args::parse_spacing)]
+    pub(crate) probe_spacing: Option<f64>,
     /// Light-map texels per scene unit (metres for glTF); default: automatic (about 256
     /// texels per triangle, 8 M at most; Sponza gets 18 per metre). Lowered where the charts
     /// would not fit one 8192² page.

@@ -1131,3 +1131,87 @@ fn converge_measures_light_maps_against_time() {
     }
     assert!(out.join("lightmap_convergence.png").is_file());
 }
+
+/// `bake --probes`: what a dynamic mesh at each point receives from the irradiance volume, in
+/// the layout `reference --probes` writes, measured against it.
+#[test]
+fn bake_probes_writes_the_volumes_light_and_its_error_against_the_path_tracer() {
+    let dir = tmp("probes");
+    std::fs::create_dir_all(&dir).expect("dir");
+    let probes = dir.join("probes_in.csv");
+    std::fs::write(
+        &probes,
+        "name,x,y,z,nx,ny,nz\nup,0.278,0.3,0.28,0,1,0\ndown,0.278,0.3,0.28,0,-1,0\n\
+         red wall,0.4,0.45,0.2,1,0,0\ngreen wall,0.1,0.45,0.2,-1,0,0\n",
+    )
+    .expect("probes");
+    let probes = probes.display().to_string();
+    let reference = dir.join("reference");
+    run_ok(
+        &[
+            "reference",
+            "--builtin",
+            "cornell-box",
+            "--no-surfaces",
+            "--samples",
+            "16384",
+            "--probes",
+            &probes,
+        ],
+        &reference,
+    );
+    let baked = dir.join("bake");
+    let ref_csv = reference.join("probes.csv").display().to_string();
+    let stdout = run_ok(
+        &[
+            "bake",
+            "--builtin",
+            "cornell-box",
+            "--probes",
+            &probes,
+            "--reference-probes",
+            &ref_csv,
+        ],
+        &baked,
+    );
+    assert!(stdout.contains("probes: a volume of 17×17×17"), "{stdout}");
+    let csv = std::fs::read_to_string(baked.join("probes.csv")).expect("probes.csv");
+    let mut lines = csv.lines();
+    assert_eq!(lines.next(), Some("name,E_r,E_g,E_b"));
+    let rows: Vec<Vec<String>> = lines
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    assert_eq!(rows.len(), 4);
+    let e = |r: &Vec<String>, c: usize| r[c].parse::<f64>().expect("number");
+    assert!(
+        e(&rows[2], 1) > 1.5 * e(&rows[2], 2),
+        "facing the red wall: {rows:?}"
+    );
+    assert!(
+        e(&rows[3], 2) > 1.5 * e(&rows[3], 1),
+        "facing the green wall: {rows:?}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(baked.join("report.json")).expect("report"))
+            .expect("json");
+    let vs = &report["probes"]["vs_reference"];
+    let mean = vs["mean_rel"].as_f64().expect("mean");
+    assert!(mean < 0.03, "{vs}");
+    assert_eq!(report["probes"]["volume"]["probes"], 17 * 17 * 17);
+    // A reference that lacks a probe is refused before the bake, in one line.
+    std::fs::write(dir.join("short.csv"), "name,E_r,E_g,E_b\nup,1,1,1\n").expect("short");
+    let st = radiant()
+        .args(["bake", "--builtin", "cornell-box", "--probes", &probes])
+        .arg("--reference-probes")
+        .arg(dir.join("short.csv"))
+        .arg("--out")
+        .arg(dir.join("refused"))
+        .output()
+        .expect("runs");
+    let stderr = String::from_utf8_lossy(&st.stderr);
+    assert_eq!(st.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("no probe 'down'") && stderr.lines().count() == 1,
+        "{stderr}"
+    );
+}

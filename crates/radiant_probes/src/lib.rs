@@ -38,6 +38,9 @@ use radiant_radiosity::system::Rgb;
 use radiant_scene::{Light, LightKind, Scene, Sky};
 use radiant_visibility::Visibility;
 
+mod volume;
+pub use volume::{ProbeVolume, VolumeParams};
+
 /// Real spherical harmonics of order 2 (bands 0 to 2), in the usual order
 /// `Y00, Y1-1, Y10, Y11, Y2-2, Y2-1, Y20, Y21, Y22` with `Y1-1 ∝ y, Y10 ∝ z, Y11 ∝ x`.
 pub fn sh9(d: DVec3) -> [f64; 9] {
@@ -126,25 +129,25 @@ impl Probe {
 
 /// An emitting triangle kept apart (the mesh's frame).
 #[derive(Clone, Copy, Debug)]
-struct Emitter {
-    v: [DVec3; 3],
-    normal: DVec3,
+pub(crate) struct Emitter {
+    pub(crate) v: [DVec3; 3],
+    pub(crate) normal: DVec3,
     area: f64,
-    emission: Rgb,
-    double_sided: bool,
+    pub(crate) emission: Rgb,
+    pub(crate) double_sided: bool,
 }
 
 /// Bakes probes from a solved bake and evaluates them (see the module).
 pub struct ProbeBaker<'a, V> {
-    mesh: &'a Mesh,
+    pub(crate) mesh: &'a Mesh,
     field: &'a SmoothField,
-    vis: &'a V,
+    pub(crate) vis: &'a V,
     params: ProbeParams,
-    lights: Vec<Light>,
+    pub(crate) lights: Vec<Light>,
     /// Per input triangle of the mesh: its surface's emission and whether it is double-sided.
     root_emission: Vec<Rgb>,
     double_sided: Vec<bool>,
-    emitters: Vec<Emitter>,
+    pub(crate) emitters: Vec<Emitter>,
     /// Whether the emitters are kept apart (else they go into the harmonics).
     apart: bool,
     /// Cumulative power of the emitters.
@@ -262,28 +265,39 @@ impl<'a, V: Visibility> ProbeBaker<'a, V> {
     /// at the probe with unit normal `n`: the harmonics' irradiance (clamped at 0), the visible
     /// lights' and the kept-apart emitters' exactly.
     pub fn h(&self, probe: &Probe, n: DVec3) -> Rgb {
-        let y = sh9(n);
-        let mut h: Rgb = std::array::from_fn(|c| {
-            let e: f64 = (0..9).map(|k| BAND[k] * probe.sh[c][k] * y[k]).sum();
-            e.max(0.0) / PI
-        });
-        for (l, &seen) in self.lights.iter().zip(&probe.lights) {
+        let lights: Vec<f64> = probe.lights.iter().map(|&v| f64::from(v)).collect();
+        let emitters: Vec<f64> = probe.emitters.iter().map(|&v| f64::from(v)).collect();
+        self.evaluate(probe.position, n, &probe.sh, &lights, &emitters)
+    }
+
+    /// `H` at `x` for unit normal `n` from harmonics `sh` (clamped at 0), and the lights' and
+    /// kept-apart emitters' light at `x` exactly, times their visibilities `lights` and
+    /// `emitters` (in order; blended where several probes meet).
+    pub(crate) fn evaluate(
+        &self,
+        x: DVec3,
+        n: DVec3,
+        sh: &[[f64; 9]; 3],
+        lights: &[f64],
+        emitters: &[f64],
+    ) -> Rgb {
+        let mut h = sh_h(sh, n);
+        for (l, &seen) in self.lights.iter().zip(lights) {
             if seen <= 0.0 {
                 continue;
             }
-            let Some((to_light, dist_world, _)) = self.toward(l, probe.position) else {
+            let Some((to_light, dist_world, _)) = self.toward(l, x) else {
                 continue;
             };
-            let irr = l.irradiance(to_light, n.dot(to_light), dist_world) * f64::from(seen);
+            let irr = l.irradiance(to_light, n.dot(to_light), dist_world) * seen;
             for (h, colour) in h.iter_mut().zip(l.color) {
                 *h += irr * colour / PI;
             }
         }
-        for (e, &share) in self.emitters.iter().zip(&probe.emitters) {
+        for (e, &share) in self.emitters.iter().zip(emitters) {
             if share <= 0.0 {
                 continue;
             }
-            let x = probe.position;
             let mut f = point_to_triangle(x, n, &e.v, e.normal);
             if e.double_sided {
                 f += point_to_triangle(x, n, &[e.v[0], e.v[2], e.v[1]], -e.normal);
@@ -292,7 +306,7 @@ impl<'a, V: Visibility> ProbeBaker<'a, V> {
                 continue;
             }
             for (h, emission) in h.iter_mut().zip(e.emission) {
-                *h += emission * f * f64::from(share);
+                *h += emission * f * share;
             }
         }
         h
@@ -333,7 +347,7 @@ impl<'a, V: Visibility> ProbeBaker<'a, V> {
 
     /// Toward punctual light `l` from `x` (the mesh's frame): the unit direction, the distance
     /// in world units (1 for a directional light), and where its shadow ray ends.
-    fn toward(&self, l: &Light, x: DVec3) -> Option<(DVec3, f64, DVec3)> {
+    pub(crate) fn toward(&self, l: &Light, x: DVec3) -> Option<(DVec3, f64, DVec3)> {
         match l.kind {
             LightKind::Directional => {
                 let d = (-l.direction).try_normalize()?;
@@ -456,6 +470,16 @@ impl<V: Visibility> ProbeBaker<'_, V> {
     pub fn bake_world(&self, p: DVec3, key: u64) -> Probe {
         self.bake(self.mesh.frame.to_local(p), key)
     }
+}
+
+/// `H` for unit normal `n` from radiance harmonics `sh`: the irradiance over π, clamped at 0
+/// (order 2 can ring below it where the light is sharp).
+pub(crate) fn sh_h(sh: &[[f64; 9]; 3], n: DVec3) -> Rgb {
+    let y = sh9(n);
+    std::array::from_fn(|c| {
+        let e: f64 = (0..9).map(|k| BAND[k] * sh[c][k] * y[k]).sum();
+        e.max(0.0) / PI
+    })
 }
 
 /// Adds radiance `l` from unit direction `d`, times `weight` (a solid angle), to `sh`.

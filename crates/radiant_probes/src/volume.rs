@@ -1,0 +1,208 @@
+//! An irradiance volume: probes on a regular grid over the scene's bounds, interpolated at any
+//! point for any normal, as a dynamic mesh is lit.
+//!
+//! At a point `x` with normal `n`, the eight probes of the cell around `x` are blended with
+//! trilinear weights, each times
+//!
+//! - its **validity**: 0 for a probe inside closed geometry ([`Probe::inside`]), which would
+//!   darken whatever stands beside it;
+//! - its **visibility** from `x`: 0 when geometry lies between them (a segment from just off
+//!   `x` along `n` to the probe), so the light of a room does not leak through its wall into
+//!   the next (DDGI and Unity's APV test a depth or a ray for the same reason).
+//!
+//! DDGI also weights a probe by `0.05 + (1 + n·ω)²/4` (ω toward it), favouring probes in
+//! front of the surface. Measured on the Cornell box (48 point-normal pairs between probes,
+//! against the path tracer), it biased normals that face a gradient toward the probes on that
+//! side: facing the box's open front, 13 % too dark; without it, 1.19 % mean and 3.8 % worst
+//! (16 divisions), so the visibility test alone guards against leaks here.
+//!
+//! Where no probe of the cell passes, the nearest valid probe is taken alone. The blend is of
+//! what each probe holds, re-evaluated at `x`: the harmonics are blended, and the lights' and
+//! emitters' light is computed at `x` itself for `n`, times the blended visibilities (soft
+//! shadows between probes).
+
+use glam::DVec3;
+use radiant_radiosity::system::Rgb;
+use radiant_visibility::Visibility;
+use rayon::prelude::*;
+
+use crate::{Probe, ProbeBaker};
+
+/// How a volume is laid out.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VolumeParams {
+    /// Distance between neighbouring probes, scene units; `None`: the scene's longest extent
+    /// over [`VolumeParams::DIVISIONS`], coarsened so that at most `max_probes` fit.
+    pub spacing: Option<f64>,
+    /// The most probes a volume holds (the spacing grows to fit).
+    pub max_probes: usize,
+}
+
+impl VolumeParams {
+    /// Probes along the longest extent by default. On the Cornell box (48 point-normal pairs
+    /// between probes against the path tracer): 10 divisions 1.53 % mean and 8.3 % worst,
+    /// 16 divisions 1.19 % and 3.8 % (4913 probes).
+    pub const DIVISIONS: f64 = 16.0;
+}
+
+impl Default for VolumeParams {
+    fn default() -> Self {
+        VolumeParams {
+            spacing: None,
+            max_probes: 32_768,
+        }
+    }
+}
+
+/// Probes on a grid (see the module); positions in the bake mesh's frame.
+#[derive(Clone, Debug)]
+pub struct ProbeVolume {
+    /// The first probe's position.
+    pub origin: DVec3,
+    /// Distance between neighbours (the mesh's frame).
+    pub step: f64,
+    /// Probes along x, y and z.
+    pub dims: [usize; 3],
+    /// `dims[0] × dims[1] × dims[2]` probes, x fastest.
+    pub probes: Vec<Probe>,
+}
+
+impl ProbeVolume {
+    /// Bakes probes over the bounds of the baker's mesh (in parallel; the same bits on any
+    /// thread count: each probe's rays are keyed by its index).
+    pub fn bake<V: Visibility>(baker: &ProbeBaker<'_, V>, params: &VolumeParams) -> ProbeVolume {
+        let mesh = baker.mesh;
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for &r in &mesh.roots {
+            for v in mesh.nodes[r as usize].v {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+        }
+        if !lo.is_finite() || !hi.is_finite() {
+            (lo, hi) = (DVec3::ZERO, DVec3::ZERO);
+        }
+        let extent = hi - lo;
+        let longest = extent.max_element().max(1e-9);
+        let max = params.max_probes.max(1) as f64;
+        let mut step = match params.spacing {
+            Some(s) if s.is_finite() && s > 0.0 => s / mesh.frame.scale,
+            _ => longest / VolumeParams::DIVISIONS,
+        };
+        let count = |step: f64| -> [usize; 3] {
+            std::array::from_fn(|k| (extent[k] / step).ceil().max(0.0) as usize + 1)
+        };
+        while count(step).iter().map(|&c| c as f64).product::<f64>() > max {
+            step *= 1.1;
+        }
+        let dims = count(step);
+        // Centred on the bounds.
+        let span = DVec3::new(
+            (dims[0] - 1) as f64,
+            (dims[1] - 1) as f64,
+            (dims[2] - 1) as f64,
+        ) * step;
+        let origin = (lo + hi) * 0.5 - span * 0.5;
+        let probes = (0..dims[0] * dims[1] * dims[2])
+            .into_par_iter()
+            .map(|k| {
+                let (i, j, l) = (
+                    k % dims[0],
+                    (k / dims[0]) % dims[1],
+                    k / (dims[0] * dims[1]),
+                );
+                let x = origin + DVec3::new(i as f64, j as f64, l as f64) * step;
+                baker.bake(x, k as u64)
+            })
+            .collect();
+        ProbeVolume {
+            origin,
+            step,
+            dims,
+            probes,
+        }
+    }
+
+    /// How many probes lie inside geometry (left out of the interpolation).
+    pub fn inside(&self) -> usize {
+        self.probes.iter().filter(|p| p.inside()).count()
+    }
+
+    /// `H` a surface at `x` (the mesh's frame) with unit normal `n` receives from the volume.
+    pub fn h<V: Visibility>(&self, baker: &ProbeBaker<'_, V>, x: DVec3, n: DVec3) -> Rgb {
+        let g = (x - self.origin) / self.step;
+        let base: [i64; 3] = std::array::from_fn(|k| {
+            (g[k].floor() as i64).clamp(0, self.dims[k].saturating_sub(2) as i64)
+        });
+        let from = x + n * (0.02 * self.step);
+        let mut blend: Vec<(&Probe, f64)> = Vec::with_capacity(8);
+        for corner in 0..8 {
+            let c: [i64; 3] = std::array::from_fn(|k| {
+                (base[k] + ((corner >> k) & 1) as i64).min(self.dims[k] as i64 - 1)
+            });
+            let probe = &self.probes[self.index(c)];
+            if probe.inside() {
+                continue;
+            }
+            let t: f64 = (0..3)
+                .map(|k| {
+                    let f = (g[k] - base[k] as f64).clamp(0.0, 1.0);
+                    if (corner >> k) & 1 == 1 { f } else { 1.0 - f }
+                })
+                .product();
+            if t <= 0.0 {
+                continue;
+            }
+            if !baker
+                .vis
+                .segment_clear(from.as_vec3(), probe.position.as_vec3())
+            {
+                continue;
+            }
+            blend.push((probe, t));
+        }
+        if blend.is_empty() {
+            match self.probes.iter().filter(|p| !p.inside()).min_by(|a, b| {
+                (a.position - x)
+                    .length_squared()
+                    .total_cmp(&(b.position - x).length_squared())
+            }) {
+                Some(p) => blend.push((p, 1.0)),
+                None => return [0.0; 3],
+            }
+        }
+        let total: f64 = blend.iter().map(|(_, w)| w).sum();
+        let mut sh = [[0.0; 9]; 3];
+        let mut lights = vec![0.0f64; baker.lights.len()];
+        let mut emitters = vec![0.0f64; baker.emitters.len()];
+        for (p, w) in &blend {
+            let w = w / total;
+            for (a, b) in sh.iter_mut().flatten().zip(p.sh.iter().flatten()) {
+                *a += w * b;
+            }
+            for (a, &v) in lights.iter_mut().zip(&p.lights) {
+                *a += w * f64::from(v);
+            }
+            for (a, &v) in emitters.iter_mut().zip(&p.emitters) {
+                *a += w * f64::from(v);
+            }
+        }
+        baker.evaluate(x, n, &sh, &lights, &emitters)
+    }
+
+    /// The irradiance `E = π H` at `x` in scene (world) units for unit normal `n`.
+    pub fn irradiance_world<V: Visibility>(
+        &self,
+        baker: &ProbeBaker<'_, V>,
+        p: DVec3,
+        n: DVec3,
+    ) -> Rgb {
+        let x = baker.mesh.frame.to_local(p);
+        self.h(baker, x, n).map(|v| v * std::f64::consts::PI)
+    }
+
+    fn index(&self, c: [i64; 3]) -> usize {
+        let [i, j, l] = c.map(|v| v.max(0) as usize);
+        (l * self.dims[1] + j) * self.dims[0] + i
+    }
+}
