@@ -298,14 +298,16 @@ fn light_does_not_leak_through_a_thin_wall() {
         DVec3::new(0.0, 0.0, -2.0),
     );
     add_surface(&mut scene, "floor", [0.6; 3], [0.0; 3], &floor);
-    // The wall: a closed box x ∈ [−0.05, 0.05], y ∈ [0, 1.5], z ∈ [−1, 1], faces outward.
-    let (lo, hi) = (DVec3::new(-0.05, 0.0, -1.0), DVec3::new(0.05, 1.5, 1.0));
+    // The wall: a closed box x ∈ [0.07, 0.17], y ∈ [0, 1.5], z ∈ [−1, 1], faces outward: between
+    // the probes at x = 0 and 0.25 (a sixteenth of the 4 m floor apart), so that a point 2 cm
+    // behind it shares its cell with the lit side's probes.
+    let (lo, hi) = (DVec3::new(0.07, 0.0, -1.0), DVec3::new(0.17, 1.5, 1.0));
     let wall = radiant_radiosity::scenes::box_triangles(lo, hi, false);
     add_surface(&mut scene, "wall", [0.6; 3], [0.0; 3], &wall);
     scene.lights.push(Light {
         name: "bulb".into(),
         kind: LightKind::Point,
-        position: DVec3::new(1.0, 1.0, 0.0),
+        position: DVec3::new(1.2, 1.0, 0.0),
         direction: DVec3::NEG_Y,
         color: [1.0; 3],
         intensity: 50.0,
@@ -326,9 +328,9 @@ fn light_does_not_leak_through_a_thin_wall() {
             .iter()
             .map(|&n| baker.irradiance(p, n).iter().sum::<f64>())
             .sum();
-        if x.x < -0.05 {
+        if x.x < 0.07 {
             dark = dark.max(e);
-        } else if x.x > 0.05 {
+        } else if x.x > 0.17 {
             lit = lit.max(e);
         }
     }
@@ -337,8 +339,8 @@ fn light_does_not_leak_through_a_thin_wall() {
     for y in [0.3, 0.7, 1.1] {
         for z in [-0.5, 0.0, 0.4] {
             for n in [DVec3::X, DVec3::NEG_X, DVec3::Y, DVec3::NEG_Y] {
-                let behind = volume.irradiance_world(&baker, DVec3::new(-0.07, y, z), n);
-                let front = volume.irradiance_world(&baker, DVec3::new(0.07, y, z), -n);
+                let behind = volume.irradiance_world(&baker, DVec3::new(0.05, y, z), n);
+                let front = volume.irradiance_world(&baker, DVec3::new(0.19, y, z), -n);
                 let (b, f) = (behind.iter().sum::<f64>(), front.iter().sum::<f64>());
                 assert!(
                     b <= 0.01 * f.max(1e-3),
