@@ -108,7 +108,7 @@ pub(crate) fn write(
     let values: Vec<[f64; 3]> = asked
         .probes
         .iter()
-        .map(|p| volume.irradiance_world(&baker, p.position, p.normal))
+        .map(|p| volume.irradiance_world(p.position, p.normal, Some(&solved.vis)))
         .collect();
     let mut csv = String::from("name,E_r,E_g,E_b\n");
     for (p, e) in asked.probes.iter().zip(&values) {

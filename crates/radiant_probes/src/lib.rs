@@ -127,6 +127,87 @@ impl Probe {
     }
 }
 
+/// What a probe's light is evaluated with at a point, whatever the probe or blend of probes:
+/// the punctual lights and the emitters kept apart, and the mesh's frame they are placed in.
+/// A [`ProbeVolume`] owns one, so that it is read without the bake it came from.
+#[derive(Clone, Debug)]
+pub struct Lighting {
+    frame: radiant_radiosity::mesh::Frame,
+    lights: Vec<Light>,
+    emitters: Vec<Emitter>,
+}
+
+impl Lighting {
+    /// `H` at `x` (the mesh's frame) for unit normal `n` from harmonics `sh` (clamped at 0),
+    /// and the lights' and kept-apart emitters' light at `x` exactly, times their
+    /// visibilities `lights` and `emitters` (in order; blended where several probes meet).
+    pub fn evaluate(
+        &self,
+        x: DVec3,
+        n: DVec3,
+        sh: &[[f64; 9]; 3],
+        lights: &[f64],
+        emitters: &[f64],
+    ) -> Rgb {
+        let mut h = sh_h(sh, n);
+        for (l, &seen) in self.lights.iter().zip(lights) {
+            if seen <= 0.0 {
+                continue;
+            }
+            let Some((to_light, dist_world, _)) = self.toward(l, x) else {
+                continue;
+            };
+            let irr = l.irradiance(to_light, n.dot(to_light), dist_world) * seen;
+            for (h, colour) in h.iter_mut().zip(l.color) {
+                *h += irr * colour / PI;
+            }
+        }
+        for (e, &share) in self.emitters.iter().zip(emitters) {
+            if share <= 0.0 {
+                continue;
+            }
+            let mut f = point_to_triangle(x, n, &e.v, e.normal);
+            if e.double_sided {
+                f += point_to_triangle(x, n, &[e.v[0], e.v[2], e.v[1]], -e.normal);
+            }
+            if f.is_nan() || f <= 0.0 {
+                continue;
+            }
+            for (h, emission) in h.iter_mut().zip(e.emission) {
+                *h += emission * f * share;
+            }
+        }
+        h
+    }
+
+    /// How many punctual lights and kept-apart emitters a probe holds visibilities for.
+    pub fn counts(&self) -> (usize, usize) {
+        (self.lights.len(), self.emitters.len())
+    }
+
+    /// The mesh's frame (world → the probes' positions).
+    pub fn frame(&self) -> radiant_radiosity::mesh::Frame {
+        self.frame
+    }
+
+    /// Toward punctual light `l` from `x` (the mesh's frame): the unit direction, the distance
+    /// in world units (1 for a directional light), and where its shadow ray ends.
+    fn toward(&self, l: &Light, x: DVec3) -> Option<(DVec3, f64, DVec3)> {
+        match l.kind {
+            LightKind::Directional => {
+                let d = (-l.direction).try_normalize()?;
+                Some((d, 1.0, x + d * 4.0))
+            }
+            _ => {
+                let local = self.frame.to_local(l.position);
+                let to = local - x;
+                let len = to.length();
+                (len > 0.0).then(|| (to / len, len * self.frame.scale, local))
+            }
+        }
+    }
+}
+
 /// An emitting triangle kept apart (the mesh's frame).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Emitter {
@@ -143,11 +224,12 @@ pub struct ProbeBaker<'a, V> {
     field: &'a SmoothField,
     pub(crate) vis: &'a V,
     params: ProbeParams,
-    pub(crate) lights: Vec<Light>,
+    pub(crate) lighting: Lighting,
     /// Per input triangle of the mesh: its surface's emission and whether it is double-sided.
     root_emission: Vec<Rgb>,
     double_sided: Vec<bool>,
-    pub(crate) emitters: Vec<Emitter>,
+    /// Every emitting triangle (the kept-apart ones are `lighting`'s, when `apart`).
+    emitters: Vec<Emitter>,
     /// Whether the emitters are kept apart (else they go into the harmonics).
     apart: bool,
     /// Cumulative power of the emitters.
@@ -197,12 +279,17 @@ impl<'a, V: Visibility> ProbeBaker<'a, V> {
             });
         }
         let apart = emitters.len() <= params.analytic_emitters;
+        let lighting = Lighting {
+            frame: mesh.frame,
+            lights: scene.lights.clone(),
+            emitters: if apart { emitters.clone() } else { Vec::new() },
+        };
         ProbeBaker {
             mesh,
             field,
             vis,
             params,
-            lights: scene.lights.clone(),
+            lighting,
             root_emission,
             double_sided,
             emitters,
@@ -234,9 +321,10 @@ impl<'a, V: Visibility> ProbeBaker<'a, V> {
         }
         let backfaces = f64::from(back) / f64::from(rays);
         let lights = self
+            .lighting
             .lights
             .iter()
-            .map(|l| match self.toward(l, x) {
+            .map(|l| match self.lighting.toward(l, x) {
                 Some((_, _, target)) if self.vis.segment_clear(x.as_vec3(), target.as_vec3()) => {
                     1.0
                 }
@@ -267,49 +355,8 @@ impl<'a, V: Visibility> ProbeBaker<'a, V> {
     pub fn h(&self, probe: &Probe, n: DVec3) -> Rgb {
         let lights: Vec<f64> = probe.lights.iter().map(|&v| f64::from(v)).collect();
         let emitters: Vec<f64> = probe.emitters.iter().map(|&v| f64::from(v)).collect();
-        self.evaluate(probe.position, n, &probe.sh, &lights, &emitters)
-    }
-
-    /// `H` at `x` for unit normal `n` from harmonics `sh` (clamped at 0), and the lights' and
-    /// kept-apart emitters' light at `x` exactly, times their visibilities `lights` and
-    /// `emitters` (in order; blended where several probes meet).
-    pub(crate) fn evaluate(
-        &self,
-        x: DVec3,
-        n: DVec3,
-        sh: &[[f64; 9]; 3],
-        lights: &[f64],
-        emitters: &[f64],
-    ) -> Rgb {
-        let mut h = sh_h(sh, n);
-        for (l, &seen) in self.lights.iter().zip(lights) {
-            if seen <= 0.0 {
-                continue;
-            }
-            let Some((to_light, dist_world, _)) = self.toward(l, x) else {
-                continue;
-            };
-            let irr = l.irradiance(to_light, n.dot(to_light), dist_world) * seen;
-            for (h, colour) in h.iter_mut().zip(l.color) {
-                *h += irr * colour / PI;
-            }
-        }
-        for (e, &share) in self.emitters.iter().zip(emitters) {
-            if share <= 0.0 {
-                continue;
-            }
-            let mut f = point_to_triangle(x, n, &e.v, e.normal);
-            if e.double_sided {
-                f += point_to_triangle(x, n, &[e.v[0], e.v[2], e.v[1]], -e.normal);
-            }
-            if f.is_nan() || f <= 0.0 {
-                continue;
-            }
-            for (h, emission) in h.iter_mut().zip(e.emission) {
-                *h += emission * f * share;
-            }
-        }
-        h
+        self.lighting
+            .evaluate(probe.position, n, &probe.sh, &lights, &emitters)
     }
 
     /// The irradiance `E = π H` (W/m² in the scene's emission units) for normal `n`.
@@ -342,23 +389,6 @@ impl<'a, V: Visibility> ProbeBaker<'a, V> {
                 (std::array::from_fn(|k| (b[k] - e[k]).max(0.0)), false)
             }
             None => (self.sky.as_ref().map_or([0.0; 3], |s| s.radiance(d)), false),
-        }
-    }
-
-    /// Toward punctual light `l` from `x` (the mesh's frame): the unit direction, the distance
-    /// in world units (1 for a directional light), and where its shadow ray ends.
-    pub(crate) fn toward(&self, l: &Light, x: DVec3) -> Option<(DVec3, f64, DVec3)> {
-        match l.kind {
-            LightKind::Directional => {
-                let d = (-l.direction).try_normalize()?;
-                Some((d, 1.0, x + d * 4.0))
-            }
-            _ => {
-                let local = self.mesh.frame.to_local(l.position);
-                let to = local - x;
-                let len = to.length();
-                (len > 0.0).then(|| (to / len, len * self.mesh.frame.scale, local))
-            }
         }
     }
 

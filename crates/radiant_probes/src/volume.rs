@@ -26,7 +26,7 @@ use radiant_radiosity::system::Rgb;
 use radiant_visibility::Visibility;
 use rayon::prelude::*;
 
-use crate::{Probe, ProbeBaker};
+use crate::{Lighting, Probe, ProbeBaker};
 
 /// How a volume is laid out.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -65,6 +65,8 @@ pub struct ProbeVolume {
     pub dims: [usize; 3],
     /// `dims[0] × dims[1] × dims[2]` probes, x fastest.
     pub probes: Vec<Probe>,
+    /// What the probes' light is evaluated with (their lights, emitters and frame).
+    pub lighting: Lighting,
 }
 
 impl ProbeVolume {
@@ -120,6 +122,7 @@ impl ProbeVolume {
             step,
             dims,
             probes,
+            lighting: baker.lighting.clone(),
         }
     }
 
@@ -128,8 +131,10 @@ impl ProbeVolume {
         self.probes.iter().filter(|p| p.inside()).count()
     }
 
-    /// `H` a surface at `x` (the mesh's frame) with unit normal `n` receives from the volume.
-    pub fn h<V: Visibility>(&self, baker: &ProbeBaker<'_, V>, x: DVec3, n: DVec3) -> Rgb {
+    /// `H` a surface at `x` (the mesh's frame) with unit normal `n` receives from the volume;
+    /// with `vis` (the scene's rays in the same frame), the probes hidden from `x` are left
+    /// out (no leak through walls), without it only those inside geometry.
+    pub fn h(&self, x: DVec3, n: DVec3, vis: Option<&dyn Visibility>) -> Rgb {
         let g = (x - self.origin) / self.step;
         let base: [i64; 3] = std::array::from_fn(|k| {
             (g[k].floor() as i64).clamp(0, self.dims[k].saturating_sub(2) as i64)
@@ -153,10 +158,7 @@ impl ProbeVolume {
             if t <= 0.0 {
                 continue;
             }
-            if !baker
-                .vis
-                .segment_clear(from.as_vec3(), probe.position.as_vec3())
-            {
+            if vis.is_some_and(|v| !v.segment_clear(from.as_vec3(), probe.position.as_vec3())) {
                 continue;
             }
             blend.push((probe, t));
@@ -173,8 +175,8 @@ impl ProbeVolume {
         }
         let total: f64 = blend.iter().map(|(_, w)| w).sum();
         let mut sh = [[0.0; 9]; 3];
-        let mut lights = vec![0.0f64; baker.lights.len()];
-        let mut emitters = vec![0.0f64; baker.emitters.len()];
+        let (nl, ne) = self.lighting.counts();
+        let (mut lights, mut emitters) = (vec![0.0f64; nl], vec![0.0f64; ne]);
         for (p, w) in &blend {
             let w = w / total;
             for (a, b) in sh.iter_mut().flatten().zip(p.sh.iter().flatten()) {
@@ -187,18 +189,14 @@ impl ProbeVolume {
                 *a += w * f64::from(v);
             }
         }
-        baker.evaluate(x, n, &sh, &lights, &emitters)
+        self.lighting.evaluate(x, n, &sh, &lights, &emitters)
     }
 
-    /// The irradiance `E = π H` at `x` in scene (world) units for unit normal `n`.
-    pub fn irradiance_world<V: Visibility>(
-        &self,
-        baker: &ProbeBaker<'_, V>,
-        p: DVec3,
-        n: DVec3,
-    ) -> Rgb {
-        let x = baker.mesh.frame.to_local(p);
-        self.h(baker, x, n).map(|v| v * std::f64::consts::PI)
+    /// The irradiance `E = π H` at `p` in scene (world) units for unit normal `n` (`vis` as
+    /// in [`ProbeVolume::h`]).
+    pub fn irradiance_world(&self, p: DVec3, n: DVec3, vis: Option<&dyn Visibility>) -> Rgb {
+        let x = self.lighting.frame().to_local(p);
+        self.h(x, n, vis).map(|v| v * std::f64::consts::PI)
     }
 
     fn index(&self, c: [i64; 3]) -> usize {

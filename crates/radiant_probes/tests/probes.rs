@@ -233,7 +233,7 @@ fn cornell_box_volume_agrees_with_the_path_tracer_between_its_probes() {
     let (truth, _) = tracer.probes(&probes, &params, &|_| {}).expect("trace");
     let (mut sum, mut worst) = (0.0, 0.0f64);
     for (p, t) in probes.iter().zip(&truth) {
-        let got = volume.irradiance_world(&baker, p.position, p.normal);
+        let got = volume.irradiance_world(p.position, p.normal, Some(&solved.vis));
         let err =
             (0..3).map(|c| (got[c] - t.mean[c]).abs()).sum::<f64>() / t.mean.iter().sum::<f64>();
         eprintln!(
@@ -278,7 +278,7 @@ fn probes_inside_geometry_do_not_darken_what_stands_beside_them() {
         let exact = baker.bake_world(p, 100 + k as u64);
         for n in [DVec3::Y, DVec3::NEG_Y, DVec3::X] {
             let want = baker.irradiance(&exact, n);
-            let got = volume.irradiance_world(&baker, p, n);
+            let got = volume.irradiance_world(p, n, Some(&solved.vis));
             let err =
                 (0..3).map(|c| (got[c] - want[c]).abs()).sum::<f64>() / want.iter().sum::<f64>();
             assert!(err < 0.1, "{p}, normal {n}: {got:?} vs {want:?}");
@@ -339,8 +339,8 @@ fn light_does_not_leak_through_a_thin_wall() {
     for y in [0.3, 0.7, 1.1] {
         for z in [-0.5, 0.0, 0.4] {
             for n in [DVec3::X, DVec3::NEG_X, DVec3::Y, DVec3::NEG_Y] {
-                let behind = volume.irradiance_world(&baker, DVec3::new(0.05, y, z), n);
-                let front = volume.irradiance_world(&baker, DVec3::new(0.19, y, z), -n);
+                let behind = volume.irradiance_world(DVec3::new(0.05, y, z), n, Some(&solved.vis));
+                let front = volume.irradiance_world(DVec3::new(0.19, y, z), -n, Some(&solved.vis));
                 let (b, f) = (behind.iter().sum::<f64>(), front.iter().sum::<f64>());
                 assert!(
                     b <= 0.01 * f.max(1e-3),
