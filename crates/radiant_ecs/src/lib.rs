@@ -20,19 +20,21 @@
 
 pub mod app;
 pub mod bake;
+pub mod probes;
 #[cfg(feature = "render")]
 pub mod render;
 pub mod scene;
 
 use app::{App, Plugin};
 
-/// The scene and bake plugins.
+/// The scene, bake and probe plugins.
 pub struct RadiantPlugins;
 
 impl Plugin for RadiantPlugins {
     fn build(&self, app: &mut App) {
         app.add_plugins(scene::ScenePlugin)
-            .add_plugins(bake::BakePlugin);
+            .add_plugins(bake::BakePlugin)
+            .add_plugins(probes::ProbePlugin);
     }
 }
 
@@ -44,6 +46,7 @@ pub mod prelude {
         BakeControl, BakePhase, BakePlugin, BakeStatus, BakeSystems, BakeWorker, BakedLighting,
         RadiosityBake,
     };
+    pub use crate::probes::{BakedProbes, ProbePlugin, ProbeSystems, ProbeVolumeBake};
     #[cfg(feature = "render")]
     pub use crate::render::{
         Bloom, DebugView, GaussianBlur, Gpu, LastFrame, RenderPlugin, RenderSettings, RenderState,

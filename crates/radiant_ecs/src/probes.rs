@@ -1,0 +1,118 @@
+//! Irradiance probes for what moves, kept up to date with the background bake.
+//!
+//! Insert [`ProbeVolumeBake`] (with [`crate::bake::RadiosityBake`]) and every light the bake
+//! publishes for the current scene (not a geometry edit's preview, not a stale one) is sampled
+//! into an irradiance volume ([`radiant_probes::ProbeVolume`]) by a task on bevy's
+//! `AsyncComputeTaskPool`; [`BakedProbes`] holds the latest. The frame never waits: a volume
+//! in flight is picked up by a later frame, and a light published meanwhile is sampled next.
+//! Without [`ProbeVolumeBake`] nothing is sampled and nothing allocated: a scene with nothing
+//! that moves does not pay for probes.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use bevy_ecs::prelude::*;
+use bevy_tasks::{AsyncComputeTaskPool, Task, futures::check_ready};
+use radiant_probes::{ProbeBaker, ProbeParams, ProbeVolume, VolumeParams};
+
+use crate::app::{App, Plugin, PostUpdate};
+use crate::bake::{BakeStatus, BakeSystems, BakedLighting};
+use crate::scene::gather_scene;
+
+/// Probes for the world's dynamic meshes. Present → a volume follows the bake's light; absent
+/// → none is made.
+#[derive(Resource, Clone, Copy, Debug, Default)]
+pub struct ProbeVolumeBake {
+    /// The grid (default: a sixteenth of the scene's longest extent apart).
+    pub volume: VolumeParams,
+    /// Each probe's rays.
+    pub probe: ProbeParams,
+}
+
+/// The latest irradiance volume.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct BakedProbes {
+    /// The [`BakedLighting::generation`] it was sampled from (0: none yet).
+    pub generation: u64,
+    /// The volume: read it with [`ProbeVolume::irradiance_world`].
+    pub volume: Option<Arc<ProbeVolume>>,
+    /// Seconds its sampling took (off the frame).
+    pub seconds: f64,
+    /// A newer volume is being sampled.
+    pub in_flight: bool,
+    /// Volumes published so far.
+    pub published: u64,
+}
+
+/// The task sampling a volume, and the light generation it samples.
+#[derive(Resource, Default)]
+struct ProbeTask(Option<(u64, Task<(ProbeVolume, f64)>)>);
+
+/// System set of [`drive_probes`], after the bake's.
+#[derive(SystemSet, Clone, Debug, PartialEq, Eq, Hash)]
+pub struct ProbeSystems;
+
+/// Keeps [`BakedProbes`] up to date: add it with [`crate::bake::BakePlugin`] and insert
+/// [`ProbeVolumeBake`].
+pub struct ProbePlugin;
+
+impl Plugin for ProbePlugin {
+    fn build(&self, app: &mut App) {
+        app.init_resource::<BakedProbes>()
+            .init_resource::<ProbeTask>()
+            .configure_sets(PostUpdate, ProbeSystems.after(BakeSystems))
+            .add_systems(PostUpdate, drive_probes.in_set(ProbeSystems));
+    }
+}
+
+/// Publishes a finished volume, and starts sampling the bake's newest light when none is in
+/// flight (see the module).
+pub fn drive_probes(world: &mut World) {
+    let done = match &mut world.resource_mut::<ProbeTask>().0 {
+        Some((_, task)) => check_ready(task),
+        None => None,
+    };
+    if let Some((volume, seconds)) = done {
+        let generation = world
+            .resource_mut::<ProbeTask>()
+            .0
+            .take()
+            .map_or(0, |(g, _)| g);
+        let mut p = world.resource_mut::<BakedProbes>();
+        p.generation = generation;
+        p.volume = Some(Arc::new(volume));
+        p.seconds = seconds;
+        p.published += 1;
+    }
+    let running = world.resource::<ProbeTask>().0.is_some();
+    world.resource_mut::<BakedProbes>().in_flight = running;
+    let Some(settings) = world.get_resource::<ProbeVolumeBake>().copied() else {
+        return;
+    };
+    if running {
+        return;
+    }
+    let lighting = world.resource::<BakedLighting>();
+    let (generation, preview) = (lighting.generation, lighting.preview);
+    let (Some(mesh), Some(field)) = (lighting.mesh.clone(), lighting.field.clone()) else {
+        return;
+    };
+    if generation <= world.resource::<BakedProbes>().generation
+        || preview
+        || world.resource::<BakeStatus>().stale
+    {
+        return;
+    }
+    // The light matches the world's scene now (not stale): the scene its mesh was made from.
+    let scene = gather_scene(world);
+    let task = AsyncComputeTaskPool::get().spawn(async move {
+        let t0 = Instant::now();
+        let masks = radiant_radiosity::input::masks(&scene);
+        let vis = radiant_radiosity::input::visibility(&mesh, masks.as_ref());
+        let baker = ProbeBaker::new(&scene, &mesh, &field, &vis, settings.probe);
+        let volume = ProbeVolume::bake(&baker, &settings.volume);
+        (volume, t0.elapsed().as_secs_f64())
+    });
+    world.resource_mut::<ProbeTask>().0 = Some((generation, task));
+    world.resource_mut::<BakedProbes>().in_flight = true;
+}

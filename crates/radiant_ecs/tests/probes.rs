@@ -1,0 +1,144 @@
+//! Headless ECS tests of the probe volume that follows the background bake.
+
+use std::time::Duration;
+
+use glam::DVec3;
+use radiant_ecs::prelude::*;
+use radiant_probes::{ProbeBaker, ProbeParams, ProbeVolume, VolumeParams};
+use radiant_radiosity::{Bake, BakeParams, SolverKind};
+
+fn params() -> BakeParams {
+    let mut p = BakeParams::default();
+    p.mesh.patch_size = 0.3;
+    p.solver = SolverKind::GaussSeidel;
+    p.solver_params.tolerance = 1e-6;
+    p
+}
+
+fn cornell_app(probes: bool) -> App {
+    let mut app = App::new();
+    app.add_plugins(RadiantPlugins)
+        .insert_resource(RadiosityBake {
+            params: params(),
+            ..RadiosityBake::default()
+        });
+    if probes {
+        app.insert_resource(ProbeVolumeBake::default());
+    }
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+    spawn_scene(&mut app.world, &scene);
+    app
+}
+
+/// Steps frames until the bake has converged and the probes follow its light (60 s at most);
+/// returns whether a frame passed while a volume was in flight.
+fn settle(app: &mut App) -> bool {
+    let t = std::time::Instant::now();
+    let mut saw_in_flight = false;
+    let ok = app.run_until(u64::MAX, Duration::from_millis(1), |w| {
+        let s = w.resource::<BakeStatus>();
+        assert!(s.phase != BakePhase::Failed, "bake failed: {:?}", s.error);
+        let p = w.resource::<BakedProbes>();
+        saw_in_flight |= p.in_flight;
+        let current = s.phase == BakePhase::Converged
+            && !s.stale
+            && p.generation == w.resource::<BakedLighting>().generation
+            && !p.in_flight;
+        current || t.elapsed() > Duration::from_secs(60)
+    });
+    assert!(
+        ok && t.elapsed() < Duration::from_secs(60),
+        "not settled in 60 s"
+    );
+    saw_in_flight
+}
+
+/// The volume a direct bake of the world's scene gives (as `radiant bake --probes` makes it).
+fn direct_volume(app: &mut App) -> ProbeVolume {
+    let scene = gather_scene(&mut app.world);
+    let result = Bake::new(&scene, &params())
+        .expect("bake")
+        .run_to_end(&mut |_| {})
+        .expect("solve");
+    let solved = radiant_probes::Solved::new(&scene, &result);
+    let baker: ProbeBaker<'_, _> = solved.baker(&scene, &result.mesh, ProbeParams::default());
+    ProbeVolume::bake(&baker, &VolumeParams::default())
+}
+
+fn close(a: [f64; 3], b: [f64; 3], rel: f64) -> bool {
+    (0..3).all(|c| (a[c] - b[c]).abs() <= rel * b[c].abs().max(1e-3))
+}
+
+/// Points beside the short block, where moving it changes the light.
+const BESIDE: [DVec3; 2] = [DVec3::new(0.32, 0.08, 0.15), DVec3::new(0.05, 0.08, 0.17)];
+
+#[test]
+fn the_volume_follows_the_bake_and_a_moved_block_without_the_frame_waiting() {
+    let mut app = cornell_app(true);
+    let waited_for_none = settle(&mut app);
+    assert!(
+        waited_for_none,
+        "no frame passed while a volume was sampled"
+    );
+    let first = app.world.resource::<BakedProbes>().clone();
+    let volume = first.volume.clone().expect("a volume");
+    assert_eq!(volume.dims, [17, 17, 17]);
+    let want = direct_volume(&mut app);
+    let normals = [DVec3::Y, DVec3::NEG_Y, DVec3::X, DVec3::NEG_Z];
+    for p in BESIDE {
+        for n in normals {
+            let (got, want) = (
+                volume.irradiance_world(p, n, None),
+                want.irradiance_world(p, n, None),
+            );
+            assert!(close(got, want, 1e-3), "{p} {n}: {got:?} vs {want:?}");
+        }
+    }
+    // Move the short block 4 cm: the bake edits, the probes follow.
+    let mut q = app.world.query::<(&Name, &mut Transform)>();
+    for (n, mut t) in q.iter_mut(&mut app.world) {
+        if n.as_str().starts_with("short_block") {
+            t.translation.x += 0.04;
+        }
+    }
+    app.update();
+    settle(&mut app);
+    let moved = app.world.resource::<BakedProbes>().clone();
+    assert!(moved.generation > first.generation && moved.published > first.published);
+    let after = moved.volume.expect("a volume");
+    let want = direct_volume(&mut app);
+    let mut changed = false;
+    for p in BESIDE {
+        for n in normals {
+            let (got, want_now) = (
+                after.irradiance_world(p, n, None),
+                want.irradiance_world(p, n, None),
+            );
+            assert!(
+                close(got, want_now, 1e-3),
+                "{p} {n}: {got:?} vs {want_now:?}"
+            );
+            changed |= !close(got, volume.irradiance_world(p, n, None), 1e-2);
+        }
+    }
+    assert!(changed, "the move changed no probe beside the block");
+    eprintln!(
+        "volume sampled in {:.3} s, then {:.3} s after the move",
+        first.seconds, moved.seconds
+    );
+}
+
+#[test]
+fn without_the_setting_no_volume_is_made() {
+    let mut app = cornell_app(false);
+    let t = std::time::Instant::now();
+    app.run_until(u64::MAX, Duration::from_millis(1), |w| {
+        w.resource::<BakeStatus>().phase == BakePhase::Converged
+            || t.elapsed() > Duration::from_secs(60)
+    });
+    for _ in 0..20 {
+        app.update();
+    }
+    let p = app.world.resource::<BakedProbes>();
+    assert!(p.volume.is_none() && !p.in_flight && p.published == 0);
+}
