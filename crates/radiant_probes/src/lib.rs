@@ -135,6 +135,8 @@ pub struct Lighting {
     frame: radiant_radiosity::mesh::Frame,
     lights: Vec<Light>,
     emitters: Vec<Emitter>,
+    /// [`ProbeParams::emitter_samples`].
+    emitter_samples: u32,
 }
 
 impl Lighting {
@@ -183,6 +185,55 @@ impl Lighting {
     /// How many punctual lights and kept-apart emitters a probe holds visibilities for.
     pub fn counts(&self) -> (usize, usize) {
         (self.lights.len(), self.emitters.len())
+    }
+
+    /// The share of emitter `e`'s solid angle seen from `x` that no geometry hides: shadow rays
+    /// to the centroids of `k²` equal parts, each weighted by its solid angle, `k` at least
+    /// `√emitter_samples` and finer where `x` is near (a part no wider than a quarter of its
+    /// distance). 0 where `x` is behind a one-sided emitter.
+    fn visible_share(&self, e: &Emitter, x: DVec3, vis: &dyn Visibility) -> f64 {
+        let centre = (e.v[0] + e.v[1] + e.v[2]) / 3.0;
+        let near = (centre - x).length().max(1e-9);
+        let base = f64::from(self.emitter_samples).sqrt().ceil().max(1.0);
+        let k = base.max(4.0 * e.area.sqrt() / near).min(64.0) as u32;
+        let (mut seen, mut all) = (0.0, 0.0);
+        for (b1, b2) in radiant_radiosity::points::lattice(k) {
+            let y = e.v[0] * (1.0 - b1 - b2) + e.v[1] * b1 + e.v[2] * b2;
+            let to = y - x;
+            let r2 = to.length_squared();
+            let cos_y = -e.normal.dot(to);
+            let cos_y = if e.double_sided { cos_y.abs() } else { cos_y };
+            if r2.is_nan() || r2 <= 0.0 || cos_y <= 0.0 {
+                continue;
+            }
+            let w = cos_y / (r2 * r2.sqrt());
+            all += w;
+            if vis.segment_clear(x.as_vec3(), y.as_vec3()) {
+                seen += w;
+            }
+        }
+        if all > 0.0 { seen / all } else { 0.0 }
+    }
+
+    /// The visibility of each light and each kept-apart emitter from `x` itself (shadow rays of
+    /// `vis`, in order): what a probe holds for its own place, and what a point read with the
+    /// scene's rays takes instead of its probes' blend (a sun's shadow edge is sharp where the
+    /// probes are metres apart).
+    pub fn visibility_at(&self, x: DVec3, vis: &dyn Visibility) -> (Vec<f64>, Vec<f64>) {
+        let lights = self
+            .lights
+            .iter()
+            .map(|l| match self.toward(l, x) {
+                Some((_, _, target)) if vis.segment_clear(x.as_vec3(), target.as_vec3()) => 1.0,
+                _ => 0.0,
+            })
+            .collect();
+        let emitters = self
+            .emitters
+            .iter()
+            .map(|e| self.visible_share(e, x, vis))
+            .collect();
+        (lights, emitters)
     }
 
     /// The mesh's frame (world → the probes' positions).
@@ -283,6 +334,7 @@ impl<'a, V: Visibility> ProbeBaker<'a, V> {
             frame: mesh.frame,
             lights: scene.lights.clone(),
             emitters: if apart { emitters.clone() } else { Vec::new() },
+            emitter_samples: params.emitter_samples,
         };
         ProbeBaker {
             mesh,
@@ -320,22 +372,10 @@ impl<'a, V: Visibility> ProbeBaker<'a, V> {
             add(&mut sh, d, l, 4.0 * PI / f64::from(rays));
         }
         let backfaces = f64::from(back) / f64::from(rays);
-        let lights = self
-            .lighting
-            .lights
-            .iter()
-            .map(|l| match self.lighting.toward(l, x) {
-                Some((_, _, target)) if self.vis.segment_clear(x.as_vec3(), target.as_vec3()) => {
-                    1.0
-                }
-                _ => 0.0,
-            })
-            .collect();
+        let (lights, emitters) = self.lighting.visibility_at(x, self.vis);
+        let lights = lights.into_iter().map(|v| v as f32).collect();
         let emitters = if self.apart {
-            self.emitters
-                .iter()
-                .map(|e| self.visible_share(e, x) as f32)
-                .collect()
+            emitters.into_iter().map(|v| v as f32).collect()
         } else {
             self.emitters_into(&mut sh, x, &mut rng);
             Vec::new()
@@ -390,37 +430,6 @@ impl<'a, V: Visibility> ProbeBaker<'a, V> {
             }
             None => (self.sky.as_ref().map_or([0.0; 3], |s| s.radiance(d)), false),
         }
-    }
-
-    /// The share of emitter `e`'s solid angle seen from `x` that no geometry hides: shadow rays
-    /// to the centroids of `k²` equal parts, each weighted by its solid angle, `k` at least
-    /// `√emitter_samples` and finer where `x` is near (a part no wider than a quarter of its
-    /// distance). 0 where `x` is behind a one-sided emitter.
-    fn visible_share(&self, e: &Emitter, x: DVec3) -> f64 {
-        let centre = (e.v[0] + e.v[1] + e.v[2]) / 3.0;
-        let near = (centre - x).length().max(1e-9);
-        let base = f64::from(self.params.emitter_samples)
-            .sqrt()
-            .ceil()
-            .max(1.0);
-        let k = base.max(4.0 * e.area.sqrt() / near).min(64.0) as u32;
-        let (mut seen, mut all) = (0.0, 0.0);
-        for (b1, b2) in radiant_radiosity::points::lattice(k) {
-            let y = e.v[0] * (1.0 - b1 - b2) + e.v[1] * b1 + e.v[2] * b2;
-            let to = y - x;
-            let r2 = to.length_squared();
-            let cos_y = -e.normal.dot(to);
-            let cos_y = if e.double_sided { cos_y.abs() } else { cos_y };
-            if r2.is_nan() || r2 <= 0.0 || cos_y <= 0.0 {
-                continue;
-            }
-            let w = cos_y / (r2 * r2.sqrt());
-            all += w;
-            if self.vis.segment_clear(x.as_vec3(), y.as_vec3()) {
-                seen += w;
-            }
-        }
-        if all > 0.0 { seen / all } else { 0.0 }
     }
 
     /// The emitters' radiance into `sh` from `emitter_samples` points sampled by power, each

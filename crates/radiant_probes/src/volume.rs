@@ -18,8 +18,11 @@
 //!
 //! Where no probe of the cell passes, the nearest valid probe is taken alone. The blend is of
 //! what each probe holds, re-evaluated at `x`: the harmonics are blended, and the lights' and
-//! emitters' light is computed at `x` itself for `n`, times the blended visibilities (soft
-//! shadows between probes).
+//! emitters' light is computed at `x` itself for `n`, times their visibility at `x` when the
+//! scene's rays are given (shadow rays, as a renderer's shadow maps would give it: Sponza's
+//! sun blended from probes 3.2 m apart put sun in the arcades' shadow, up to 580× the path
+//! tracer's irradiance there), else the probes' visibilities blended (soft shadows between
+//! probes).
 
 use glam::DVec3;
 use radiant_radiosity::system::Rgb;
@@ -188,6 +191,10 @@ impl ProbeVolume {
             for (a, &v) in emitters.iter_mut().zip(&p.emitters) {
                 *a += w * f64::from(v);
             }
+        }
+        // With the scene's rays, the lights' and emitters' shadows at the point itself.
+        if let Some(v) = vis {
+            (lights, emitters) = self.lighting.visibility_at(from, v);
         }
         self.lighting.evaluate(x, n, &sh, &lights, &emitters)
     }
