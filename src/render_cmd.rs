@@ -165,6 +165,8 @@ fn against_reference(
         return Ok(serde_json::Value::Null);
     };
     {
+        radiant::scene::exr_fits(&bytes, 1 << 28)
+            .map_err(|e| anyhow::anyhow!("--reference-image: {e}"))?;
         let reference = radiant::render::capture::read_image(&bytes)?;
         let plain = FrameSettings {
             debug_view: DebugView::Lit,

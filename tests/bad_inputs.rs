@@ -275,3 +275,24 @@ fn degenerate_triangles_are_skipped_and_counted() {
     assert!(!scene.has_emitters());
     assert_eq!(scene.warnings().len(), 1);
 }
+
+/// Found by fuzzing the sky images: an OpenEXR whose data window is 671 million texels wide
+/// behind an 8 × 4 display window passed the `image` crate's limits (it sizes an EXR by its
+/// display window) and had the `exr` crate ask for 16 GB. Refused from its header, typed.
+#[test]
+fn an_exr_sky_whose_data_window_is_huge_is_refused_from_its_header() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fuzz/regressions/sky/exr_data_window_671m_wide.exr");
+    let bytes = std::fs::read(&path).expect("the fuzzer's input");
+    let e = radiant_scene::Sky::from_image_bytes("sky.exr", &bytes, 1.0).expect_err("refused");
+    assert!(
+        matches!(&e, SceneError::InvalidSky(what) if what.contains("data window of 2684354592")),
+        "{e}"
+    );
+    let e = radiant_scene::exr_fits(&bytes, u64::MAX).map(|()| "fits");
+    assert_eq!(
+        e,
+        Ok("fits"),
+        "within an unbounded budget the header itself is sound"
+    );
+}

@@ -494,6 +494,37 @@ impl Scene {
     }
 }
 
+/// Whether `bytes`, when they are OpenEXR, may be decoded within `max_texels`: every part's
+/// data window and display window at most that many texels, and no deep data. The `image` crate sizes an EXR by its display window while the `exr`
+/// crate allocates by the data window, so a header whose data window is 671 million texels wide
+/// and whose display window is 8 × 4 passed `image`'s limits and asked for 16 GB (found by
+/// fuzzing the sky images). Bytes that are not EXR pass (their own decoder checks them).
+///
+/// # Errors
+/// A sentence saying what is too large or unreadable.
+pub fn exr_fits(bytes: &[u8], max_texels: u64) -> Result<(), String> {
+    if !bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
+        return Ok(());
+    }
+    let meta = exr::meta::MetaData::read_from_buffered(std::io::Cursor::new(bytes), false)
+        .map_err(|e| format!("OpenEXR header: {e}"))?;
+    for (i, h) in meta.headers.iter().enumerate() {
+        let area = |w: usize, h: usize| (w as u64).saturating_mul(h as u64);
+        let data = area(h.layer_size.width(), h.layer_size.height());
+        let display = h.shared_attributes.display_window.size;
+        let display = area(display.width(), display.height());
+        if h.deep {
+            return Err(format!("OpenEXR part {i} holds deep data"));
+        }
+        if data > max_texels || display > max_texels {
+            return Err(format!(
+                "OpenEXR part {i}: a data window of {data} or display window of {display} texels is more than {max_texels}"
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Reads a file a user named, refusing what would be read without end or past a budget: a
 /// device or a pipe (`/dev/zero`, `/dev/urandom`, a FIFO) and a file of more than `max_bytes`.
 /// Every input Radiant reads from a path goes through it.

@@ -265,6 +265,8 @@ impl Sky {
             r.limits(limits);
             Ok(r)
         };
+        crate::exr_fits(bytes, max_texels)
+            .map_err(|what| SceneError::InvalidSky(format!("{name}: {what}")))?;
         let (width, height) = reader()?.into_dimensions().map_err(undecodable)?;
         if width == 0 || height == 0 {
             return Err(SceneError::InvalidSky(format!("{name}: empty image")));
