@@ -296,3 +296,18 @@ fn an_exr_sky_whose_data_window_is_huge_is_refused_from_its_header() {
         "within an unbounded budget the header itself is sound"
     );
 }
+
+/// Found by fuzzing the sky images: a B44-compressed OpenEXR block whose arithmetic wraps,
+/// which the exr crate's decoder (like OpenEXR's C reference) computes modulo 2^32; with
+/// overflow checks it panicked there. Every build of the workspace wraps it (Cargo.toml's
+/// profile for exr): decoded or refused, never a panic.
+#[test]
+fn a_b44_exr_sky_whose_arithmetic_wraps_does_not_panic() {
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/regressions/sky/exr_b44_wrapping.exr");
+    let bytes = std::fs::read(&path).expect("the fuzzer's input");
+    let decoded = panic::catch_unwind(|| {
+        radiant_scene::Sky::from_image_bytes("sky.exr", &bytes, 1.0).map(|_| ())
+    });
+    assert!(decoded.is_ok(), "the decoder panicked");
+}
