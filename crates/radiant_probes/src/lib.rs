@@ -30,6 +30,8 @@
 use std::f64::consts::PI;
 
 use glam::DVec3;
+use radiant_radiosity::cluster::sh;
+use radiant_radiosity::final_gather::{Emitter, Emitters};
 use radiant_radiosity::form_factors::analytic::point_to_triangle;
 use radiant_radiosity::mesh::Mesh;
 use radiant_radiosity::rng::{Rng, hash};
@@ -40,37 +42,6 @@ use radiant_visibility::Visibility;
 
 mod volume;
 pub use volume::{ProbeVolume, VolumeParams};
-
-/// Real spherical harmonics of order 2 (bands 0 to 2), in the usual order
-/// `Y00, Y1-1, Y10, Y11, Y2-2, Y2-1, Y20, Y21, Y22` with `Y1-1 ∝ y, Y10 ∝ z, Y11 ∝ x`.
-pub fn sh9(d: DVec3) -> [f64; 9] {
-    let (x, y, z) = (d.x, d.y, d.z);
-    [
-        0.282_094_791_773_878_1,
-        0.488_602_511_902_919_9 * y,
-        0.488_602_511_902_919_9 * z,
-        0.488_602_511_902_919_9 * x,
-        1.092_548_430_592_079_2 * x * y,
-        1.092_548_430_592_079_2 * y * z,
-        0.315_391_565_252_52 * (3.0 * z * z - 1.0),
-        1.092_548_430_592_079_2 * x * z,
-        0.546_274_215_296_039_6 * (x * x - y * y),
-    ]
-}
-
-/// The clamped cosine's band factors: irradiance `E(n) = Σ A_l L_lm Y_lm(n)` for radiance
-/// coefficients `L_lm` (Ramamoorthi and Hanrahan 2001).
-const BAND: [f64; 9] = [
-    PI,
-    2.0 * PI / 3.0,
-    2.0 * PI / 3.0,
-    2.0 * PI / 3.0,
-    PI / 4.0,
-    PI / 4.0,
-    PI / 4.0,
-    PI / 4.0,
-    PI / 4.0,
-];
 
 /// How probes are baked.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -259,16 +230,6 @@ impl Lighting {
     }
 }
 
-/// An emitting triangle kept apart (the mesh's frame).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Emitter {
-    pub(crate) v: [DVec3; 3],
-    pub(crate) normal: DVec3,
-    area: f64,
-    pub(crate) emission: Rgb,
-    pub(crate) double_sided: bool,
-}
-
 /// Bakes probes from a solved bake and evaluates them (see the module).
 pub struct ProbeBaker<'a, V> {
     pub(crate) mesh: &'a Mesh,
@@ -298,37 +259,12 @@ impl<'a, V: Visibility> ProbeBaker<'a, V> {
         vis: &'a V,
         params: ProbeParams,
     ) -> ProbeBaker<'a, V> {
-        let surface = |root: usize| {
-            mesh.root_surface
-                .get(root)
-                .and_then(|&s| scene.surfaces.get(s as usize))
-        };
-        let root_emission: Vec<Rgb> = (0..mesh.roots.len())
-            .map(|r| surface(r).map_or([0.0; 3], |s| s.emission))
-            .collect();
-        let double_sided: Vec<bool> = (0..mesh.roots.len())
-            .map(|r| surface(r).is_some_and(|s| s.double_sided))
-            .collect();
-        let (mut emitters, mut cdf, mut total) = (Vec::new(), Vec::new(), 0.0);
-        for (r, &id) in mesh.roots.iter().enumerate() {
-            let e = root_emission[r];
-            let v = mesh.nodes[id as usize].v;
-            let cross = (v[1] - v[0]).cross(v[2] - v[0]);
-            let area = 0.5 * cross.length();
-            let power = area * (e[0] + e[1] + e[2]);
-            if !(power > 0.0 && power.is_finite()) {
-                continue;
-            }
-            total += power;
-            cdf.push(total);
-            emitters.push(Emitter {
-                v,
-                normal: cross / (2.0 * area),
-                area,
-                emission: e,
-                double_sided: double_sided[r],
-            });
-        }
+        let Emitters {
+            root_emission,
+            double_sided,
+            list: emitters,
+            cdf,
+        } = Emitters::new(scene, mesh);
         let apart = emitters.len() <= params.analytic_emitters;
         let lighting = Lighting {
             frame: mesh.frame,
@@ -513,23 +449,21 @@ impl<V: Visibility> ProbeBaker<'_, V> {
 
 /// `H` for unit normal `n` from radiance harmonics `sh`: the irradiance over π, clamped at 0
 /// (order 2 can ring below it where the light is sharp).
-pub(crate) fn sh_h(sh: &[[f64; 9]; 3], n: DVec3) -> Rgb {
-    let y = sh9(n);
-    std::array::from_fn(|c| {
-        let e: f64 = (0..9).map(|k| BAND[k] * sh[c][k] * y[k]).sum();
-        e.max(0.0) / PI
-    })
+pub(crate) fn sh_h(coeffs: &[[f64; 9]; 3], n: DVec3) -> Rgb {
+    // The order-2 basis and the clamped cosine's bands are the clustered bake's own.
+    let c = sh::cosine(n);
+    std::array::from_fn(|k| sh::dot(&coeffs[k], &c).max(0.0) / PI)
 }
 
 /// Adds radiance `l` from unit direction `d`, times `weight` (a solid angle), to `sh`.
-fn add(sh: &mut [[f64; 9]; 3], d: DVec3, l: Rgb, weight: f64) {
-    let y = sh9(d);
-    for c in 0..3 {
-        if l[c] == 0.0 {
+fn add(coeffs: &mut [[f64; 9]; 3], d: DVec3, l: Rgb, weight: f64) {
+    let y = sh::basis(d);
+    for (c, l) in coeffs.iter_mut().zip(l) {
+        if l == 0.0 {
             continue;
         }
-        for k in 0..9 {
-            sh[c][k] += l[c] * weight * y[k];
+        for (c, y) in c.iter_mut().zip(y) {
+            *c += l * weight * y;
         }
     }
 }
@@ -555,11 +489,9 @@ mod tests {
             }
         }
         for d in [DVec3::X, DVec3::NEG_Y, DVec3::new(0.6, 0.0, 0.8)] {
-            let y = sh9(d);
-            let e: f64 = (0..9).map(|k| BAND[k] * sh[0][k] * y[k]).sum();
-            assert!((e - PI).abs() < 1e-3, "{d}: {e}");
-            let e: f64 = (0..9).map(|k| BAND[k] * sh[1][k] * y[k]).sum();
-            assert!((e - 0.5 * PI).abs() < 1e-3, "{d}: {e}");
+            let e = sh_h(&sh, d).map(|h| h * PI);
+            assert!((e[0] - PI).abs() < 1e-3, "{d}: {e:?}");
+            assert!((e[1] - 0.5 * PI).abs() < 1e-3, "{d}: {e:?}");
         }
     }
 
@@ -578,8 +510,7 @@ mod tests {
             }
         }
         for d in [DVec3::Z, DVec3::NEG_Z, DVec3::X, DVec3::new(0.0, 0.6, 0.8)] {
-            let y = sh9(d);
-            let e: f64 = (0..9).map(|k| BAND[k] * sh[0][k] * y[k]).sum();
+            let e = sh_h(&sh, d)[0] * PI;
             let want = PI + 2.0 * PI / 3.0 * d.z;
             assert!((e - want).abs() < 1e-3, "{d}: {e} vs {want}");
         }

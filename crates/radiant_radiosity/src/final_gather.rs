@@ -86,12 +86,79 @@ impl Default for GatherParams {
 
 /// An emitting input triangle, in the mesh's frame.
 #[derive(Clone, Copy, Debug)]
-struct Emitter {
-    v: [DVec3; 3],
-    normal: DVec3,
-    area: f64,
-    emission: Rgb,
-    double_sided: bool,
+pub struct Emitter {
+    /// Its corners.
+    pub v: [DVec3; 3],
+    /// Its unit normal (front side).
+    pub normal: DVec3,
+    /// Its area (the mesh's frame).
+    pub area: f64,
+    /// Its surface's emission.
+    pub emission: Rgb,
+    /// Whether it emits from both sides.
+    pub double_sided: bool,
+}
+
+/// What the input triangles of a bake's mesh emit, and which are double-sided: what a gather
+/// at a point (the final gather, an irradiance probe) needs to take the emitters' light by
+/// light sampling and the rest from the solution.
+#[derive(Clone, Debug, Default)]
+pub struct Emitters {
+    /// Per input triangle of the mesh: its surface's emission.
+    pub root_emission: Vec<Rgb>,
+    /// Per input triangle of the mesh: whether its surface is double-sided.
+    pub double_sided: Vec<bool>,
+    /// The emitting triangles of positive, finite power.
+    pub list: Vec<Emitter>,
+    /// Cumulative power (area × the sum of the emission's channels) of `list`; the last entry
+    /// is the total.
+    pub cdf: Vec<f64>,
+}
+
+impl Emitters {
+    /// The emitters of `mesh`, a bake of `scene`'s static part.
+    pub fn new(scene: &Scene, mesh: &Mesh) -> Emitters {
+        let surface = |root: usize| {
+            mesh.root_surface
+                .get(root)
+                .and_then(|&s| scene.surfaces.get(s as usize))
+        };
+        let root_emission: Vec<Rgb> = (0..mesh.roots.len())
+            .map(|r| surface(r).map_or([0.0; 3], |s| s.emission))
+            .collect();
+        let double_sided: Vec<bool> = (0..mesh.roots.len())
+            .map(|r| surface(r).is_some_and(|s| s.double_sided))
+            .collect();
+        let (mut list, mut cdf, mut total) = (Vec::new(), Vec::new(), 0.0);
+        for (r, &id) in mesh.roots.iter().enumerate() {
+            let e = root_emission[r];
+            if e.iter().all(|&c| c <= 0.0) {
+                continue;
+            }
+            let v = mesh.nodes[id as usize].v;
+            let cross = (v[1] - v[0]).cross(v[2] - v[0]);
+            let area = 0.5 * cross.length();
+            let power = area * (e[0] + e[1] + e[2]);
+            if !(power > 0.0 && power.is_finite()) {
+                continue;
+            }
+            total += power;
+            cdf.push(total);
+            list.push(Emitter {
+                v,
+                normal: cross / (2.0 * area),
+                area,
+                emission: e,
+                double_sided: double_sided[r],
+            });
+        }
+        Emitters {
+            root_emission,
+            double_sided,
+            list,
+            cdf,
+        }
+    }
 }
 
 /// Gathers light at points of a solved bake (see the module).
@@ -119,42 +186,12 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
         vis: &'a V,
         params: GatherParams,
     ) -> FinalGather<'a, V> {
-        let surface = |root: usize| {
-            mesh.root_surface
-                .get(root)
-                .and_then(|&s| scene.surfaces.get(s as usize))
-        };
-        let root_emission: Vec<Rgb> = (0..mesh.roots.len())
-            .map(|r| surface(r).map_or([0.0; 3], |s| s.emission))
-            .collect();
-        let double_sided: Vec<bool> = (0..mesh.roots.len())
-            .map(|r| surface(r).is_some_and(|s| s.double_sided))
-            .collect();
-        let mut emitters = Vec::new();
-        let mut cdf = Vec::new();
-        let mut total = 0.0;
-        for (r, &id) in mesh.roots.iter().enumerate() {
-            let e = root_emission[r];
-            if e.iter().all(|&c| c <= 0.0) {
-                continue;
-            }
-            let v = mesh.nodes[id as usize].v;
-            let cross = (v[1] - v[0]).cross(v[2] - v[0]);
-            let area = 0.5 * cross.length();
-            let power = area * (e[0] + e[1] + e[2]);
-            if !(power > 0.0 && power.is_finite()) {
-                continue;
-            }
-            total += power;
-            cdf.push(total);
-            emitters.push(Emitter {
-                v,
-                normal: cross / (2.0 * area),
-                area,
-                emission: e,
-                double_sided: double_sided[r],
-            });
-        }
+        let Emitters {
+            root_emission,
+            double_sided,
+            list: emitters,
+            cdf,
+        } = Emitters::new(scene, mesh);
         FinalGather {
             mesh,
             vis,
