@@ -237,15 +237,10 @@ pub struct ProbeBaker<'a, V> {
     pub(crate) vis: &'a V,
     params: ProbeParams,
     pub(crate) lighting: Lighting,
-    /// Per input triangle of the mesh: its surface's emission and whether it is double-sided.
-    root_emission: Vec<Rgb>,
-    double_sided: Vec<bool>,
-    /// Every emitting triangle (the kept-apart ones are `lighting`'s, when `apart`).
-    emitters: Vec<Emitter>,
+    /// Every emitter (the kept-apart ones are `lighting`'s too, when `apart`).
+    emitters: Emitters,
     /// Whether the emitters are kept apart (else they go into the harmonics).
     apart: bool,
-    /// Cumulative power of the emitters.
-    cdf: Vec<f64>,
     sky: Option<Sky>,
 }
 
@@ -259,17 +254,16 @@ impl<'a, V: Visibility> ProbeBaker<'a, V> {
         vis: &'a V,
         params: ProbeParams,
     ) -> ProbeBaker<'a, V> {
-        let Emitters {
-            root_emission,
-            double_sided,
-            list: emitters,
-            cdf,
-        } = Emitters::new(scene, mesh);
-        let apart = emitters.len() <= params.analytic_emitters;
+        let emitters = Emitters::new(scene, mesh);
+        let apart = emitters.list.len() <= params.analytic_emitters;
         let lighting = Lighting {
             frame: mesh.frame,
             lights: scene.lights.clone(),
-            emitters: if apart { emitters.clone() } else { Vec::new() },
+            emitters: if apart {
+                emitters.list.clone()
+            } else {
+                Vec::new()
+            },
             emitter_samples: params.emitter_samples,
         };
         ProbeBaker {
@@ -278,11 +272,8 @@ impl<'a, V: Visibility> ProbeBaker<'a, V> {
             vis,
             params,
             lighting,
-            root_emission,
-            double_sided,
             emitters,
             apart,
-            cdf,
             sky: scene.sky.clone().filter(|s| !s.is_dark()),
         }
     }
@@ -343,50 +334,19 @@ impl<'a, V: Visibility> ProbeBaker<'a, V> {
     /// The radiance a ray from `x` along unit `d` meets, other than the emitters' own light
     /// (kept apart or sampled by power), and whether it met the back of a one-sided face.
     fn radiance(&self, x: DVec3, d: DVec3) -> (Rgb, bool) {
-        match self
-            .vis
-            .closest_hit(x.as_vec3(), d.as_vec3(), f32::INFINITY)
-        {
-            Some(hit) => {
-                let root = hit.triangle as usize;
-                if root >= self.mesh.roots.len() {
-                    return ([0.0; 3], false);
-                }
-                if !hit.front && !self.double_sided[root] {
-                    return ([0.0; 3], true);
-                }
-                let b = self.field.radiosity(
-                    self.mesh,
-                    hit.triangle,
-                    f64::from(hit.u),
-                    f64::from(hit.v),
-                );
-                let e = self.root_emission[root];
-                (std::array::from_fn(|k| (b[k] - e[k]).max(0.0)), false)
-            }
-            None => (self.sky.as_ref().map_or([0.0; 3], |s| s.radiance(d)), false),
-        }
+        let (l, _, back) =
+            (self.emitters).along(self.mesh, self.field, self.vis, self.sky.as_ref(), x, d);
+        (l, back)
     }
 
     /// The emitters' radiance into `sh` from `emitter_samples` points sampled by power, each
     /// with a shadow ray.
     fn emitters_into(&self, sh: &mut [[f64; 9]; 3], x: DVec3, rng: &mut Rng) {
-        let (Some(&total), m) = (self.cdf.last(), self.params.emitter_samples.max(1)) else {
-            return;
-        };
+        let m = self.params.emitter_samples.max(1);
         for j in 0..m {
-            let pick = (f64::from(j) + rng.f64()) / f64::from(m) * total;
-            let i = self
-                .cdf
-                .partition_point(|&c| c <= pick)
-                .min(self.cdf.len() - 1);
-            let e = &self.emitters[i];
-            let power = self.cdf[i] - if i > 0 { self.cdf[i - 1] } else { 0.0 };
-            let (mut u, mut v) = (rng.f64(), rng.f64());
-            if u + v > 1.0 {
-                (u, v) = (1.0 - u, 1.0 - v);
-            }
-            let y = e.v[0] + (e.v[1] - e.v[0]) * u + (e.v[2] - e.v[0]) * v;
+            let Some((e, y, pdf)) = self.emitters.sample(j, m, rng) else {
+                return;
+            };
             let to = y - x;
             let r2 = to.length_squared();
             let cos_y = -e.normal.dot(to) / r2.sqrt();
@@ -397,8 +357,8 @@ impl<'a, V: Visibility> ProbeBaker<'a, V> {
             if !self.vis.segment_clear(x.as_vec3(), y.as_vec3()) {
                 continue;
             }
-            // The point's solid angle over its density (power share / area), per sample.
-            let weight = e.area * cos_y / r2 * (total / power) / f64::from(m);
+            // The point's solid angle over its density, per sample.
+            let weight = cos_y / r2 / pdf / f64::from(m);
             add(sh, to / r2.sqrt(), e.emission, weight);
         }
     }
@@ -472,22 +432,27 @@ fn add(coeffs: &mut [[f64; 9]; 3], d: DVec3, l: Rgb, weight: f64) {
 mod tests {
     use super::*;
 
-    /// Constant radiance over the sphere: irradiance π L for every normal (to the midpoint
-    /// quadrature's error).
-    #[test]
-    fn uniform_radiance_gives_pi_l_for_every_normal() {
+    /// The harmonics of radiance `l(ω)` by a fine midpoint quadrature over (cos θ, φ).
+    fn project(l: impl Fn(DVec3) -> Rgb) -> [[f64; 9]; 3] {
         let mut sh = [[0.0; 9]; 3];
         let n = 64;
-        // A fine midpoint quadrature over (cos θ, φ).
         for i in 0..n {
             for j in 0..2 * n {
                 let z = 1.0 - 2.0 * (f64::from(i) + 0.5) / f64::from(n);
                 let r = (1.0 - z * z).sqrt();
                 let phi = std::f64::consts::TAU * (f64::from(j) + 0.5) / f64::from(2 * n);
                 let d = DVec3::new(r * phi.cos(), r * phi.sin(), z);
-                add(&mut sh, d, [1.0, 0.5, 0.0], 4.0 * PI / f64::from(2 * n * n));
+                add(&mut sh, d, l(d), 4.0 * PI / f64::from(2 * n * n));
             }
         }
+        sh
+    }
+
+    /// Constant radiance over the sphere: irradiance π L for every normal (to the midpoint
+    /// quadrature's error).
+    #[test]
+    fn uniform_radiance_gives_pi_l_for_every_normal() {
+        let sh = project(|_| [1.0, 0.5, 0.0]);
         for d in [DVec3::X, DVec3::NEG_Y, DVec3::new(0.6, 0.0, 0.8)] {
             let e = sh_h(&sh, d).map(|h| h * PI);
             assert!((e[0] - PI).abs() < 1e-3, "{d}: {e:?}");
@@ -498,17 +463,7 @@ mod tests {
     /// Radiance `1 + z` (a linear gradient, inside order 2): irradiance `π + (2π/3)·n_z`.
     #[test]
     fn a_linear_gradient_is_exact_in_order_two() {
-        let mut sh = [[0.0; 9]; 3];
-        let n = 64;
-        for i in 0..n {
-            for j in 0..2 * n {
-                let z = 1.0 - 2.0 * (f64::from(i) + 0.5) / f64::from(n);
-                let r = (1.0 - z * z).sqrt();
-                let phi = std::f64::consts::TAU * (f64::from(j) + 0.5) / f64::from(2 * n);
-                let d = DVec3::new(r * phi.cos(), r * phi.sin(), z);
-                add(&mut sh, d, [1.0 + z; 3], 4.0 * PI / f64::from(2 * n * n));
-            }
-        }
+        let sh = project(|d| [1.0 + d.z; 3]);
         for d in [DVec3::Z, DVec3::NEG_Z, DVec3::X, DVec3::new(0.0, 0.6, 0.8)] {
             let e = sh_h(&sh, d)[0] * PI;
             let want = PI + 2.0 * PI / 3.0 * d.z;

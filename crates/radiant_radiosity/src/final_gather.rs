@@ -159,6 +159,60 @@ impl Emitters {
             cdf,
         }
     }
+
+    /// The `j`-th of `m` points sampled on the emitters, stratified over their power: the
+    /// emitter, the point, and its density per unit area. `None` when nothing emits.
+    pub fn sample(&self, j: u32, m: u32, rng: &mut Rng) -> Option<(&Emitter, DVec3, f64)> {
+        let total = *self.cdf.last()?;
+        let pick = (f64::from(j) + rng.f64()) / f64::from(m) * total;
+        let i = self
+            .cdf
+            .partition_point(|&c| c <= pick)
+            .min(self.cdf.len() - 1);
+        let e = &self.list[i];
+        let power = self.cdf[i] - if i > 0 { self.cdf[i - 1] } else { 0.0 };
+        let (mut u, mut v) = (rng.f64(), rng.f64());
+        if u + v > 1.0 {
+            (u, v) = (1.0 - u, 1.0 - v);
+        }
+        let y = e.v[0] + (e.v[1] - e.v[0]) * u + (e.v[2] - e.v[0]) * v;
+        Some((e, y, power / total / e.area))
+    }
+
+    /// What a ray from `origin` along unit `d` (the mesh's frame) meets in a solved bake: the
+    /// reflected radiance of the solution (`field`) where it meets a surface from its lit side
+    /// (the emitters' own light is taken by light sampling instead), the sky's where it leaves
+    /// the scene, nothing at the back of a one-sided face; how far it went (infinite when it
+    /// left); and whether it met such a back face (inside closed geometry).
+    pub fn along(
+        &self,
+        mesh: &Mesh,
+        field: &SmoothField,
+        vis: &impl Visibility,
+        sky: Option<&Sky>,
+        origin: DVec3,
+        d: DVec3,
+    ) -> (Rgb, f64, bool) {
+        match vis.closest_hit(origin.as_vec3(), d.as_vec3(), f32::INFINITY) {
+            Some(hit) => {
+                let (root, t) = (hit.triangle as usize, f64::from(hit.t));
+                if root >= mesh.roots.len() {
+                    return ([0.0; 3], t, false);
+                }
+                if !hit.front && !self.double_sided[root] {
+                    return ([0.0; 3], t, true);
+                }
+                let b = field.radiosity(mesh, hit.triangle, f64::from(hit.u), f64::from(hit.v));
+                let e = self.root_emission[root];
+                (std::array::from_fn(|k| (b[k] - e[k]).max(0.0)), t, false)
+            }
+            None => (
+                sky.map_or([0.0; 3], |s| s.radiance(d)),
+                f64::INFINITY,
+                false,
+            ),
+        }
+    }
 }
 
 /// Gathers light at points of a solved bake (see the module).
@@ -167,12 +221,7 @@ pub struct FinalGather<'a, V> {
     vis: &'a V,
     field: &'a SmoothField,
     params: GatherParams,
-    /// Per input triangle of the mesh: its surface's emission and whether it is double-sided.
-    root_emission: Vec<Rgb>,
-    double_sided: Vec<bool>,
-    emitters: Vec<Emitter>,
-    /// Cumulative power of the emitters (the last entry is the total).
-    cdf: Vec<f64>,
+    emitters: Emitters,
     sky: Option<Sky>,
 }
 
@@ -186,21 +235,12 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
         vis: &'a V,
         params: GatherParams,
     ) -> FinalGather<'a, V> {
-        let Emitters {
-            root_emission,
-            double_sided,
-            list: emitters,
-            cdf,
-        } = Emitters::new(scene, mesh);
         FinalGather {
             mesh,
             vis,
             field,
             params,
-            root_emission,
-            double_sided,
-            emitters,
-            cdf,
+            emitters: Emitters::new(scene, mesh),
             sky: scene.sky.clone().filter(|s| !s.is_dark()),
         }
     }
@@ -256,32 +296,15 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
     /// The reflected radiance (and the sky's) a ray from `origin` along unit `d` meets.
     /// And how far it went (infinite when it left the scene).
     fn radiance(&self, origin: DVec3, d: DVec3) -> (Rgb, f64) {
-        match self
-            .vis
-            .closest_hit(origin.as_vec3(), d.as_vec3(), f32::INFINITY)
-        {
-            Some(hit) => {
-                let (root, t) = (hit.triangle as usize, f64::from(hit.t));
-                if root >= self.mesh.roots.len() {
-                    return ([0.0; 3], t);
-                }
-                if !hit.front && !self.double_sided[root] {
-                    return ([0.0; 3], t);
-                }
-                let b = self.field.radiosity(
-                    self.mesh,
-                    hit.triangle,
-                    f64::from(hit.u),
-                    f64::from(hit.v),
-                );
-                let e = self.root_emission[root];
-                (std::array::from_fn(|k| (b[k] - e[k]).max(0.0)), t)
-            }
-            None => (
-                self.sky.as_ref().map_or([0.0; 3], |s| s.radiance(d)),
-                f64::INFINITY,
-            ),
-        }
+        let (l, t, _) = self.emitters.along(
+            self.mesh,
+            self.field,
+            self.vis,
+            self.sky.as_ref(),
+            origin,
+            d,
+        );
+        (l, t)
     }
 
     /// The emitters' direct `H` at `x`: with few emitting triangles, each one's exact
@@ -290,16 +313,16 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
     /// with many, points sampled on them by power.
     fn emitters_direct(&self, x: DVec3, n: DVec3, rng: &mut Rng) -> Rgb {
         let m = self.params.emitter_samples;
-        if self.emitters.is_empty() || m == 0 {
+        if self.emitters.list.is_empty() || m == 0 {
             return [0.0; 3];
         }
-        if self.emitters.len() > self.params.analytic_emitters {
+        if self.emitters.list.len() > self.params.analytic_emitters {
             return self.emitters_sampled(x, n, rng);
         }
         let from = (x + n * 1e-5).as_vec3();
         let k = f64::from(m).sqrt().ceil().max(1.0) as u32;
         let mut sum = [0.0; 3];
-        for e in &self.emitters {
+        for e in &self.emitters.list {
             let mut f = point_to_triangle(x, n, &e.v, e.normal);
             if e.double_sided {
                 f += point_to_triangle(x, n, &[e.v[0], e.v[2], e.v[1]], -e.normal);
@@ -347,24 +370,12 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
 
     /// The emitters' direct `H` at `x` from points sampled on them by power.
     fn emitters_sampled(&self, x: DVec3, n: DVec3, rng: &mut Rng) -> Rgb {
-        let (Some(&total), m) = (self.cdf.last(), self.params.emitter_samples) else {
-            return [0.0; 3];
-        };
+        let m = self.params.emitter_samples;
         let mut sum = [0.0; 3];
         for j in 0..m {
-            // Stratified over the power.
-            let pick = (f64::from(j) + rng.f64()) / f64::from(m) * total;
-            let i = self
-                .cdf
-                .partition_point(|&c| c <= pick)
-                .min(self.cdf.len() - 1);
-            let e = &self.emitters[i];
-            let power = self.cdf[i] - if i > 0 { self.cdf[i - 1] } else { 0.0 };
-            let (mut u, mut v) = (rng.f64(), rng.f64());
-            if u + v > 1.0 {
-                (u, v) = (1.0 - u, 1.0 - v);
-            }
-            let y = e.v[0] + (e.v[1] - e.v[0]) * u + (e.v[2] - e.v[0]) * v;
+            let Some((e, y, pdf)) = self.emitters.sample(j, m, rng) else {
+                return [0.0; 3];
+            };
             let to = y - x;
             let r2 = to.length_squared();
             if r2.is_nan() || r2 <= 0.0 {
@@ -386,8 +397,6 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
             {
                 continue;
             }
-            // The density of y: (power share) / area.
-            let pdf = power / total / e.area;
             let g = cos_x * cos_y / (std::f64::consts::PI * r2) / pdf;
             for k in 0..3 {
                 sum[k] += e.emission[k] * g;
@@ -401,7 +410,7 @@ impl<V: Visibility> FinalGather<'_, V> {
     /// Whether `x` (normal `n`) lies inside or under other geometry, as the light map's
     /// texels are tested ([`crate::texel_light`]).
     fn buried(&self, x: DVec3, n: DVec3) -> bool {
-        crate::texel_light::buried(self.vis, &self.double_sided, x, n)
+        crate::texel_light::buried(self.vis, &self.emitters.double_sided, x, n)
     }
 }
 
