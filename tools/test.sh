@@ -2,7 +2,7 @@
 # Radiant's whole test suite, as CI runs it: formatting, lints, the API docs' links, every test.
 #
 # Needs: the Rust toolchain pinned in rust-toolchain.toml (1.95.0, with rustfmt and clippy), a C
-# compiler for build scripts, a Vulkan driver for the GPU tests: with no GPU, Mesa's
+# and C++ compiler for build scripts and libFuzzer, a Vulkan driver for the GPU tests: with no GPU, Mesa's
 # software rasteriser lavapipe (Debian: mesa-vulkan-drivers), Mesa's GL drivers for the GL
 # backend test (libegl-mesa0 libgl1-mesa-dri), and Xvfb and xwd for the window
 # test (Debian: xvfb x11-apps). As root with apt, this script
@@ -17,12 +17,13 @@ if ! command -v cargo >/dev/null 2>&1; then
   echo "cargo not found: install Rust with rustup (https://rustup.rs), then run this again." >&2
   exit 1
 fi
-if ! command -v cc >/dev/null 2>&1; then
+# A C++ compiler too: the fuzz smoke builds libFuzzer (libfuzzer-sys).
+if ! command -v cc >/dev/null 2>&1 || ! command -v c++ >/dev/null 2>&1; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
-    say "installing a C compiler (build-essential)"
+    say "installing C and C++ compilers (build-essential)"
     apt-get update -qq && apt-get install -y -qq --no-install-recommends build-essential
   else
-    echo "no C compiler: run 'sudo apt-get install build-essential', then this again." >&2
+    echo "no C or C++ compiler: run 'sudo apt-get install build-essential', then this again." >&2
     exit 1
   fi
 fi
