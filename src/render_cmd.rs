@@ -141,33 +141,64 @@ fn bake(
     }
 }
 
-/// The frame against a path-traced image from the same camera (`--reference-image`, or the
-/// one shipped with the builtin Cornell box): radiance, no SSAO, no bloom; the whole image and
-/// the surfaces alone. Null when there is no reference.
-fn against_reference(
-    args: &RenderArgs,
-    gpu: &GpuContext,
-    frame: &mut FrameRenderer,
-) -> anyhow::Result<serde_json::Value> {
-    // Error against a path tracer from the same camera: radiance, no SSAO, no bloom.
-    let reference = match (&args.reference_image, args.scene.builtin) {
-        (Some(p), _) => Some(crate::common::read_input(
+/// The path-traced image to compare the frame with (`--reference-image`, or the one shipped
+/// with the builtin Cornell box), read and checked before anything is baked: a linear radiance
+/// image has finite, non-negative values and some light. None when there is no reference.
+fn reference_image(args: &RenderArgs) -> anyhow::Result<Option<radiant::render::capture::Image>> {
+    let bytes = match (&args.reference_image, args.scene.builtin) {
+        (Some(p), _) => crate::common::read_input(
             p,
             "--reference-image",
             4 << 30, // a float EXR of 16384² RGBA texels
-        )?),
+        )?,
         (None, Some(crate::args::BuiltinScene(Builtin::CornellBox))) => {
-            Some(CORNELL_RENDER_REFERENCE.to_vec())
+            CORNELL_RENDER_REFERENCE.to_vec()
         }
-        _ => None,
+        _ => return Ok(None),
     };
-    let Some(bytes) = reference else {
+    radiant::scene::exr_fits(&bytes, 1 << 28)
+        .map_err(|e| anyhow::anyhow!("--reference-image: {e}"))?;
+    let reference = radiant::render::capture::read_image(&bytes)
+        .map_err(|e| anyhow::anyhow!("--reference-image: {e}"))?;
+    let w = reference.width.max(1) as usize;
+    if let Some((i, t)) = reference
+        .texels
+        .iter()
+        .enumerate()
+        .find(|(_, t)| t[..3].iter().any(|v| !v.is_finite() || *v < 0.0))
+    {
+        anyhow::bail!(
+            "--reference-image: pixel ({}, {}) is {:?}: a linear radiance image has finite, \
+             non-negative values",
+            i % w,
+            i / w,
+            &t[..3]
+        );
+    }
+    anyhow::ensure!(
+        reference
+            .texels
+            .iter()
+            .any(|t| t[..3].iter().any(|&v| v > 0.0)),
+        "--reference-image: the image is black ({}×{}, every pixel 0): nothing to compare the \
+         frame with",
+        reference.width,
+        reference.height
+    );
+    Ok(Some(reference))
+}
+
+/// The frame against a path-traced image from the same camera ([`reference_image`]): radiance,
+/// no SSAO, no bloom; the whole image and the surfaces alone. Null when there is no reference.
+fn against_reference(
+    reference: Option<&radiant::render::capture::Image>,
+    gpu: &GpuContext,
+    frame: &mut FrameRenderer,
+) -> anyhow::Result<serde_json::Value> {
+    let Some(reference) = reference else {
         return Ok(serde_json::Value::Null);
     };
     {
-        radiant::scene::exr_fits(&bytes, 1 << 28)
-            .map_err(|e| anyhow::anyhow!("--reference-image: {e}"))?;
-        let reference = radiant::render::capture::read_image(&bytes)?;
         let plain = FrameSettings {
             debug_view: DebugView::Lit,
             ..FrameSettings::MINIMAL
@@ -219,10 +250,10 @@ fn against_reference(
                 radiant::render::capture::compare_images(a, b, 8)?,
             ])
         };
-        let all = compare(&ours, &reference);
-        let surfaces = compare(&mask(&ours), &mask(&reference));
+        let all = compare(&ours, reference);
+        let surfaces = compare(&mask(&ours), &mask(reference));
         if let (Some(e), Some(s)) = (all, surfaces) {
-            return Ok(describe(e, s, &reference, SS));
+            return Ok(describe(e, s, reference, SS));
         }
     }
     Ok(serde_json::Value::Null)
@@ -340,6 +371,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let frame_settings = settings(args)?;
     args.solve.init_threads()?;
     let params = args.solve.params(args.method.0, args.form_factors.0)?;
+    let reference = reference_image(args)?;
     let (scene, source) = load_scene(&args.scene)?;
     ensure_dir(&args.out)?;
     let start = Instant::now();
@@ -380,7 +412,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     write_png(&args.out.join("frame.png"), &png.ldr)?;
     write_exr(&args.out.join("frame.exr"), &exr)?;
 
-    let against = against_reference(args, &gpu, &mut frame)?;
+    let against = against_reference(reference.as_ref(), &gpu, &mut frame)?;
     let timings = match args.timings {
         0 => serde_json::Value::Null,
         n => pass_timings(&gpu, &mut frame, (w, h), &frame_settings, n)?,

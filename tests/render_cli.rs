@@ -232,6 +232,41 @@ fn render_compares_with_the_reference_tracers_image() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A reference image with no light, or with a value no radiance has, is refused in one line
+/// before anything is baked (it had given relative errors of 10^300 %).
+#[test]
+fn a_black_or_broken_reference_image_is_refused_before_the_bake() {
+    let dir = tmp("bad-reference");
+    std::fs::create_dir_all(&*dir).expect("dir");
+    let write = |name: &str, v: f32| {
+        let path = dir.join(name);
+        let img = image::Rgba32FImage::from_pixel(8, 8, image::Rgba([v, v, v, 1.0]));
+        image::DynamicImage::ImageRgba32F(img)
+            .save_with_format(&path, image::ImageFormat::OpenExr)
+            .expect("exr");
+        path
+    };
+    for (path, says) in [
+        (write("black.exr", 0.0), "the image is black"),
+        (write("nan.exr", f32::NAN), "finite, non-negative"),
+        (write("negative.exr", -1.0), "finite, non-negative"),
+    ] {
+        let out = dir.join("out");
+        let st = radiant()
+            .args(["render", "--builtin", "cornell-box", "--reference-image"])
+            .arg(&path)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .expect("runs");
+        let stderr = String::from_utf8_lossy(&st.stderr);
+        assert!(!st.status.success(), "{}: accepted", path.display());
+        assert!(stderr.contains(says), "{}: {stderr}", path.display());
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        assert!(!out.join("frame.png").exists(), "refused before the frame");
+    }
+}
+
 #[test]
 fn bake_with_the_gpu_hemicube_writes_a_light_map_and_its_error() {
     let out = tmp("gpu-hemicube");

@@ -281,9 +281,19 @@ pub struct ImageError {
     pub mean_bias: f64,
 }
 
-/// Compares linear images; `None` when the sizes differ. Accumulates in f64.
+/// Compares linear images; `None` when the sizes differ or the reference has no light (every
+/// RGB value 0, or a value not finite: no relative error is defined). Accumulates in f64.
 pub fn compare_images(a: &Image, reference: &Image, block: u32) -> Option<ImageError> {
     if (a.width, a.height) != (reference.width, reference.height) || a.texels.is_empty() {
+        return None;
+    }
+    let light: f64 = reference
+        .texels
+        .iter()
+        .flat_map(|t| &t[..3])
+        .map(|&v| f64::from(v).abs())
+        .sum();
+    if !(light.is_finite() && light > 0.0) {
         return None;
     }
     let l1 = |x: &[[f64; 3]], y: &[[f64; 3]]| {
@@ -364,6 +374,9 @@ mod tests {
             texels: vec![[1.0; 4]; 4],
         };
         assert!(compare_images(&small, &img(1.0), 2).is_none());
+        // No light in the reference: no relative error (not a huge or NaN one).
+        assert!(compare_images(&img(1.0), &img(0.0), 2).is_none());
+        assert!(compare_images(&img(1.0), &img(f32::NAN), 2).is_none());
         let e = compare_images(&img(1.1), &img(1.0), 64).expect("same size");
         assert!((e.rel_l1_blocks - 0.1).abs() < 1e-6, "{e:?}");
     }
