@@ -4,7 +4,7 @@
 //! no winit), as a linear EXR of outgoing radiance.
 //!
 //! ```text
-//! radiant_bevy_client SCENE.glb OUT.exr [--size WxH] [--supersample N]
+//! radiant_bevy_client SCENE.glb OUT.exr [--size WxH] [--supersample N] [--keep-baked-lights]
 //! ```
 //!
 //! What the export says, and how this client honours it:
@@ -12,7 +12,9 @@
 //!   `H` + emission. Bevy's lit shader adds `lightmap × lightmap_exposure × diffuse colour`,
 //!   so `lightmap_exposure` stays 1 and the camera's exposure is set to 1 (EV100 = log2(1/1.2));
 //! - the punctual lights the glb carries are marked `extras.radiant.baked`: their light is in
-//!   the light map already, so they do not light the light-mapped meshes' diffuse again
+//!   the light map already. They are left out (their specular highlights alone would differ
+//!   from `radiant render`'s diffuse frame), or with `--keep-baked-lights` kept with shadow
+//!   maps for their highlights, without lighting the light-mapped diffuse again
 //!   (`affects_lightmapped_mesh_diffuse = false`);
 //! - ambient light is off (the light map holds the bounces), tone mapping and dithering off,
 //!   no MSAA: the frame is rendered `N` times larger and box-filtered, as `radiant render` does
@@ -49,6 +51,7 @@ struct Args {
     out: PathBuf,
     size: (u32, u32),
     supersample: u32,
+    keep_baked_lights: bool,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -56,6 +59,7 @@ fn parse_args() -> Result<Args, String> {
     let mut pos = Vec::new();
     let mut size = (256, 256);
     let mut supersample = 4;
+    let mut keep_baked_lights = false;
     while let Some(a) = it.next() {
         match a.as_str() {
             "--size" => {
@@ -74,9 +78,10 @@ fn parse_args() -> Result<Args, String> {
                 let v = it.next().ok_or("--supersample needs a number")?;
                 supersample = v.parse().map_err(|e| format!("--supersample {v:?}: {e}"))?;
             }
+            "--keep-baked-lights" => keep_baked_lights = true,
             "-h" | "--help" => {
                 return Err(
-                    "usage: radiant_bevy_client SCENE.glb OUT.exr [--size WxH] [--supersample N]"
+                    "usage: radiant_bevy_client SCENE.glb OUT.exr [--size WxH] [--supersample N] [--keep-baked-lights]"
                         .into(),
                 );
             }
@@ -84,7 +89,7 @@ fn parse_args() -> Result<Args, String> {
         }
     }
     let [glb, out] = <[PathBuf; 2]>::try_from(pos).map_err(
-        |_| "usage: radiant_bevy_client SCENE.glb OUT.exr [--size WxH] [--supersample N]",
+        |_| "usage: radiant_bevy_client SCENE.glb OUT.exr [--size WxH] [--supersample N] [--keep-baked-lights]",
     )?;
     let ok = |v: u32| (1..=4096).contains(&v);
     if !ok(size.0) || !ok(size.1) || !(1..=8).contains(&supersample) {
@@ -101,6 +106,7 @@ fn parse_args() -> Result<Args, String> {
         out,
         size,
         supersample,
+        keep_baked_lights,
     })
 }
 
@@ -124,6 +130,10 @@ struct Found {
     unlit: usize,
     baked_lights: usize,
 }
+
+/// `--keep-baked-lights`: see [`unbake_lights`].
+#[derive(Resource)]
+struct KeepBakedLights(bool);
 
 /// Where the captured frame goes (written by the screenshot's observer).
 #[derive(Resource, Clone, Default)]
@@ -179,6 +189,7 @@ fn run() -> Result<(), String> {
     })
     // Where no surface is, nothing: black, as `radiant render` and the path tracer clear.
     .insert_resource(ClearColor(Color::BLACK))
+    .insert_resource(KeepBakedLights(args.keep_baked_lights))
     .init_resource::<LightmapPages>()
     .init_resource::<Found>()
     .init_resource::<Captured>()
@@ -377,30 +388,50 @@ fn baked(extras: &GltfExtras) -> bool {
         .unwrap_or(false)
 }
 
-/// Punctual lights already in the light map light only what is not light-mapped (and the
-/// specular highlights).
+/// Punctual lights already in the light map (`extras.radiant.baked`). By default they go: the
+/// light map holds their diffuse light, and their specular highlights alone, which `radiant
+/// render` does not draw, would differ from its frame. With `--keep-baked-lights` they stay for
+/// their highlights, with shadow maps, and do not light the light-mapped meshes' diffuse again
+/// (`affects_lightmapped_mesh_diffuse = false`), as a game would keep them.
 fn unbake_lights(
-    mut points: Query<(&mut PointLight, &GltfExtras), Added<PointLight>>,
-    mut spots: Query<(&mut SpotLight, &GltfExtras), Added<SpotLight>>,
-    mut suns: Query<(&mut DirectionalLight, &GltfExtras), Added<DirectionalLight>>,
+    mut commands: Commands,
+    mut points: Query<(Entity, &mut PointLight, &GltfExtras), Added<PointLight>>,
+    mut spots: Query<(Entity, &mut SpotLight, &GltfExtras), Added<SpotLight>>,
+    mut suns: Query<(Entity, &mut DirectionalLight, &GltfExtras), Added<DirectionalLight>>,
+    keep: Res<KeepBakedLights>,
     mut found: ResMut<Found>,
 ) {
-    for (mut l, e) in &mut points {
+    for (entity, mut l, e) in &mut points {
         if baked(e) {
-            l.affects_lightmapped_mesh_diffuse = false;
             found.baked_lights += 1;
+            if keep.0 {
+                l.affects_lightmapped_mesh_diffuse = false;
+                l.shadow_maps_enabled = true;
+            } else {
+                commands.entity(entity).remove::<PointLight>();
+            }
         }
     }
-    for (mut l, e) in &mut spots {
+    for (entity, mut l, e) in &mut spots {
         if baked(e) {
-            l.affects_lightmapped_mesh_diffuse = false;
             found.baked_lights += 1;
+            if keep.0 {
+                l.affects_lightmapped_mesh_diffuse = false;
+                l.shadow_maps_enabled = true;
+            } else {
+                commands.entity(entity).remove::<SpotLight>();
+            }
         }
     }
-    for (mut l, e) in &mut suns {
+    for (entity, mut l, e) in &mut suns {
         if baked(e) {
-            l.affects_lightmapped_mesh_diffuse = false;
             found.baked_lights += 1;
+            if keep.0 {
+                l.affects_lightmapped_mesh_diffuse = false;
+                l.shadow_maps_enabled = true;
+            } else {
+                commands.entity(entity).remove::<DirectionalLight>();
+            }
         }
     }
 }
