@@ -160,6 +160,7 @@ pub fn scene(vertices: Vec<Vertex>, eye: Vec3, at: Vec3, h: f32) -> RenderScene 
             pages: 1,
             texels: vec![[h; 3]],
         }),
+        probes: None,
     }
 }
 

@@ -350,6 +350,80 @@ fn direct(lights: &[Light], p: Vec3) -> f32 {
 /// An albedo that 8-bit unorm stores exactly (153 / 255), so the closed forms need no rounding.
 const ALBEDO: f32 = 0.6;
 
+/// A dynamic surface (its vertices on page `PROBE_LIT`) takes `H` from the probe grid: the
+/// trilinear blend of its cell's probes, each probe's harmonics evaluated for the normal, and
+/// a probe that is not valid left out (the other alone then, not a darker blend).
+#[test]
+fn dynamic_surfaces_take_their_light_from_the_probe_grid() {
+    use radiant_render::scene::{PROBE_LIT, ProbeGrid};
+    const Y0: f32 = 0.282_094_8;
+    const Y1: f32 = 0.488_602_5;
+    let gpu = gpu();
+    let mut v = Vec::new();
+    quad(
+        &mut v,
+        Vec3::new(-2.0, -2.0, 0.0),
+        Vec3::new(4.0, 0.0, 0.0),
+        Vec3::new(0.0, 4.0, 0.0),
+        [ALBEDO; 3],
+    );
+    for vert in &mut v {
+        vert.lightmap_page = PROBE_LIT;
+    }
+    let mut s = scene(v, Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO, 0.0);
+    // Two probes on the x axis, 4 m apart: red light from everywhere at x = -2; at x = +2
+    // green from everywhere plus blue from +z only (the order-1 z term).
+    let mut red = [[0.0f32; 3]; 9];
+    red[0] = [1.0 / Y0, 0.0, 0.0];
+    let mut green = [[0.0f32; 3]; 9];
+    green[0] = [0.0, 1.0 / Y0, 0.0];
+    green[2] = [0.0, 0.0, 0.5 / Y1];
+    let grid = |valid: Vec<bool>| ProbeGrid {
+        origin: [-2.0, 0.0, 0.0],
+        step: 4.0,
+        dims: [2, 1, 1],
+        sh: vec![red, green],
+        valid,
+    };
+    let (w, h) = (64u32, 48u32);
+    let settings = FrameSettings {
+        debug_view: DebugView::LightMap,
+        ..FrameSettings::MINIMAL
+    };
+    for (valid, probe_lit) in [
+        (vec![true, true], None),
+        (vec![true, false], Some([1.0, 0.0, 0.0])),
+    ] {
+        s.probes = Some(grid(valid.clone()));
+        let mut frame = FrameRenderer::new(&gpu, &s).expect("renderer");
+        let c = frame.capture(&gpu, w, h, &settings).expect("capture");
+        for (x, y) in [(32, 24), (10, 8), (50, 40), (40, 20)] {
+            let p = pixel_on_plane(&s.camera, w, h, x, y, Vec3::Z, 0.0);
+            let t = ((p.x + 2.0) / 4.0).clamp(0.0, 1.0);
+            // The plane faces +z: the green probe's z term adds 0.5 blue there.
+            let want = probe_lit
+                .unwrap_or([1.0 - t, t, 0.5 * t])
+                .map(|v| ALBEDO * v);
+            let got = c.hdr.at(x, y);
+            for k in 0..3 {
+                assert!(
+                    (got[k] - want[k]).abs() <= 2e-3 + 2e-3 * want[k],
+                    "valid {valid:?}, pixel ({x}, {y}) at {p}: {got:?} vs {want:?}"
+                );
+            }
+        }
+    }
+    // A grid whose probes do not fill it is a typed error, not a GPU fault.
+    s.probes = Some(ProbeGrid {
+        dims: [3, 1, 1],
+        ..grid(vec![true, true])
+    });
+    assert!(matches!(
+        FrameRenderer::new(&gpu, &s).err(),
+        Some(RenderError::ProbeLayout { .. })
+    ));
+}
+
 #[test]
 fn deferred_point_light_matches_the_closed_form() {
     let gpu = gpu();

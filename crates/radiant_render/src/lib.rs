@@ -126,6 +126,14 @@ pub enum RenderError {
     /// NaN or infinity in scene data.
     #[error("non-finite values in the {0}")]
     NonFinite(&'static str),
+    /// A probe grid whose probes do not fill its dimensions.
+    #[error("a probe grid of {dims:?} probes holds {probes}")]
+    ProbeLayout {
+        /// Probes along x, y and z.
+        dims: [u32; 3],
+        /// Probes given.
+        probes: usize,
+    },
     /// Encoding an image failed.
     #[error("image encoding: {0}")]
     Image(#[from] image::ImageError),

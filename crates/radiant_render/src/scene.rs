@@ -251,6 +251,85 @@ pub struct RenderScene {
     pub camera: CameraView,
     /// The baked light map, if any (without one the indirect term is zero).
     pub lightmap: Option<LightMap>,
+    /// The irradiance volume that lights dynamic surfaces (vertices on page [`PROBE_LIT`]);
+    /// without one they receive no `H`.
+    pub probes: Option<ProbeGrid>,
+}
+
+/// The light-map page of a dynamic surface's vertices: it has no chart, and its `H` comes from
+/// [`RenderScene::probes`] at the fragment's position and normal.
+pub const PROBE_LIT: u32 = u32::MAX;
+
+/// An irradiance volume on a regular grid, as the G-buffer pass reads it for dynamic surfaces:
+/// at a point, the eight probes of its cell blended with trilinear weights, leaving out those
+/// that are not valid (inside geometry; the nearest valid corner alone where none is), and
+/// each probe's harmonics evaluated for the fragment's normal.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProbeGrid {
+    /// The first probe, relative to [`RenderScene::origin`].
+    pub origin: [f32; 3],
+    /// Distance between neighbouring probes (positive).
+    pub step: f32,
+    /// Probes along x, y and z (each at least 1).
+    pub dims: [u32; 3],
+    /// Per probe, x fastest: `H` (the light map's quantity) as real spherical harmonics of
+    /// order 2, RGB per coefficient, in `radiant_radiosity::cluster::sh::basis`'s order:
+    /// `H(n) = Σ_k sh[k] Y_k(n)`.
+    pub sh: Vec<[[f32; 3]; 9]>,
+    /// Per probe: whether it takes part in the blend.
+    pub valid: Vec<bool>,
+}
+
+impl ProbeGrid {
+    /// Checks the layout and the values (typed error: no NaN reaches the GPU).
+    pub fn validate(&self) -> Result<(), RenderError> {
+        let count = self.dims.iter().map(|&d| d as u64).product::<u64>();
+        if self.dims.contains(&0)
+            || count != self.sh.len() as u64
+            || count != self.valid.len() as u64
+            || count > u64::from(u32::MAX)
+        {
+            return Err(RenderError::ProbeLayout {
+                dims: self.dims,
+                probes: self.sh.len(),
+            });
+        }
+        let finite = self.step.is_finite()
+            && self.step > 0.0
+            && self.origin.iter().all(|v| v.is_finite())
+            && self.sh.iter().flatten().flatten().all(|v| v.is_finite());
+        if !finite {
+            return Err(RenderError::NonFinite("probe grid"));
+        }
+        Ok(())
+    }
+
+    /// The GPU layout: a header, then per probe nine RGB coefficients, validity in the first
+    /// one's fourth component.
+    fn gpu_words(&self) -> (ProbeGridUniform, Vec<[f32; 4]>) {
+        let header = ProbeGridUniform {
+            origin_step: [self.origin[0], self.origin[1], self.origin[2], self.step],
+            dims: [self.dims[0], self.dims[1], self.dims[2], 1],
+        };
+        let mut words = Vec::with_capacity(self.sh.len() * 9);
+        for (sh, &valid) in self.sh.iter().zip(&self.valid) {
+            for (k, c) in sh.iter().enumerate() {
+                let w = if k == 0 && valid { 1.0 } else { 0.0 };
+                words.push([c[0], c[1], c[2], w]);
+            }
+        }
+        (header, words)
+    }
+}
+
+/// [`ProbeGrid`]'s header on the GPU (`dims.w` 0: no grid).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ProbeGridUniform {
+    /// The first probe (relative to the origin) and the step.
+    pub origin_step: [f32; 4],
+    /// Probes along x, y, z; w 1 when there is a grid.
+    pub dims: [u32; 4],
 }
 
 impl RenderScene {
@@ -456,6 +535,7 @@ impl RenderScene {
                 pages,
                 texels: vec![[0.0; 3]; (w * h * pages) as usize],
             }),
+            probes: None,
         })
     }
 
@@ -568,7 +648,7 @@ fn scene_vertices(
                 emissive: s.emission.map(|x| x as f32),
                 lightmap_uv: uvs[k],
                 uv: uv.to_array(),
-                lightmap_page: atlas.page[i],
+                lightmap_page: if s.dynamic { PROBE_LIT } else { atlas.page[i] },
             });
         }
     }
@@ -763,6 +843,10 @@ pub struct GpuScene {
     pub lightmap: wgpu::TextureView,
     /// Bilinear, clamped sampler.
     pub linear_sampler: wgpu::Sampler,
+    /// [`ProbeGridUniform`] (`dims.w` 0 without a grid).
+    pub probe_grid: wgpu::Buffer,
+    /// The probes' harmonics (one zeroed probe without a grid).
+    pub probes: wgpu::Buffer,
     /// [`CameraUniform`] buffer, written each frame.
     pub camera: wgpu::Buffer,
     /// The CPU scene's origin and camera.
@@ -862,6 +946,23 @@ impl GpuScene {
             min_filter: wgpu::FilterMode::Linear,
             ..Default::default()
         });
+        let (grid, words) = match &scene.probes {
+            Some(g) => {
+                g.validate()?;
+                g.gpu_words()
+            }
+            None => (ProbeGridUniform::default(), vec![[0.0; 4]; 9]),
+        };
+        let probe_grid = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("scene_probe_grid"),
+            contents: bytemuck::bytes_of(&grid),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let probes = dev.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("scene_probes"),
+            contents: bytemuck::cast_slice(&words),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
         let camera = dev.create_buffer(&wgpu::BufferDescriptor {
             label: Some("camera_uniform"),
             size: std::mem::size_of::<CameraUniform>() as u64,
@@ -880,6 +981,8 @@ impl GpuScene {
             light_count,
             lightmap,
             linear_sampler,
+            probe_grid,
+            probes,
             camera,
             origin: scene.origin,
             camera_view: scene.camera,
@@ -1150,7 +1253,7 @@ fn lightmap_texels(
         .iter()
         .map(|v| v.lightmap_page)
         .chain(scene.instance_uvs.iter().map(|u| u.page))
-        .find(|&p| p >= layers);
+        .find(|&p| p >= layers && p != PROBE_LIT);
     if let Some(p) = page {
         return Err(SceneError::LightMapPage {
             page: p,

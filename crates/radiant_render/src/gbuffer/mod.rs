@@ -56,11 +56,14 @@ impl GBufferPipeline {
             device,
             "gbuffer",
             stages,
-            // Camera, light-map pages, their sampler, per-instance light-map placement.
+            // Camera, light-map pages, their sampler, per-instance light-map placement, the
+            // probe grid and its probes (for dynamic surfaces).
             &[
                 Slot::Uniform,
                 Slot::TextureArray(filterable),
                 filtering,
+                Slot::Storage,
+                Slot::Uniform,
                 Slot::Storage,
             ],
         ));
@@ -191,6 +194,8 @@ pub fn gbuffer_pass(
             Bind::View(scene.lightmap.clone()),
             Bind::Sampler(scene.linear_sampler.clone()),
             Bind::Buffer(scene.instance_uvs.clone()),
+            Bind::Buffer(scene.probe_grid.clone()),
+            Bind::Buffer(scene.probes.clone()),
         ],
     )?;
     let materials = scene
