@@ -87,6 +87,65 @@ fn parse_irradiance(text: &str) -> anyhow::Result<Irradiance> {
     Ok(rows)
 }
 
+/// The irradiance volume over `result`'s solution of `scene` (probes `spacing` scene units
+/// apart, or the default), with the solution's rays it read.
+pub(crate) fn bake_volume(
+    scene: &Scene,
+    result: &BakeResult,
+    spacing: Option<f64>,
+) -> (Solved, ProbeVolume) {
+    let solved = Solved::new(scene, result);
+    let volume = {
+        let baker = solved.baker(scene, &result.mesh, ProbeParams::default());
+        let params = VolumeParams {
+            spacing,
+            ..VolumeParams::default()
+        };
+        ProbeVolume::bake(&baker, &params)
+    };
+    (solved, volume)
+}
+
+/// `--dynamic NODE`: marks the surfaces of each named glTF node dynamic (`NODE`, or `NODE#k`
+/// for a mesh's k-th primitive), as `{"radiant": {"dynamic": true}}` in its extras would;
+/// returns how many surfaces it marked. A name that matches no node is an error that lists
+/// some that exist.
+pub(crate) fn mark_dynamic(scene: &mut Scene, nodes: &[String]) -> anyhow::Result<usize> {
+    let mut marked = 0;
+    for node in nodes {
+        let mut found = false;
+        for s in &mut scene.surfaces {
+            let base = s.name.split_once('#').map_or(s.name.as_str(), |(b, _)| b);
+            if s.name == *node || base == node {
+                found |= true;
+                if !s.dynamic {
+                    s.dynamic = true;
+                    marked += 1;
+                }
+            }
+        }
+        if !found {
+            let mut names: Vec<&str> = scene
+                .surfaces
+                .iter()
+                .map(|s| s.name.split_once('#').map_or(s.name.as_str(), |(b, _)| b))
+                .collect();
+            names.dedup();
+            let shown = names
+                .iter()
+                .take(12)
+                .copied()
+                .collect::<Vec<_>>()
+                .join(", ");
+            anyhow::bail!(
+                "--dynamic {node:?}: no node of that name (the scene's nodes include: {shown}{})",
+                if names.len() > 12 { ", ..." } else { "" }
+            );
+        }
+    }
+    Ok(marked)
+}
+
 /// Bakes the volume over `result` (with `spacing`, scene units, or the default), writes
 /// probes.csv in `out`, and returns report.json's `probes` and the summary line.
 pub(crate) fn write(
@@ -97,13 +156,7 @@ pub(crate) fn write(
     out: &Path,
 ) -> anyhow::Result<(Value, String)> {
     let t0 = Instant::now();
-    let solved = Solved::new(scene, result);
-    let baker = solved.baker(scene, &result.mesh, ProbeParams::default());
-    let params = VolumeParams {
-        spacing,
-        ..VolumeParams::default()
-    };
-    let volume = ProbeVolume::bake(&baker, &params);
+    let (solved, volume) = bake_volume(scene, result, spacing);
     let bake_s = t0.elapsed().as_secs_f64();
     let values: Vec<[f64; 3]> = asked
         .probes

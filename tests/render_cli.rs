@@ -232,6 +232,83 @@ fn render_compares_with_the_reference_tracers_image() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A node marked dynamic (`--dynamic`) is left out of the bake and drawn lit by the probes
+/// baked from the solution: not black, the colour of the light around it (the Cornell box's
+/// tall block against the same block light-mapped), and report.json says how many probes.
+#[test]
+fn a_dynamic_node_is_lit_by_the_probes() {
+    let dir = tmp("dynamic");
+    let frame = |extra: &[&str], name: &str| {
+        let out = dir.join(name);
+        let mut args = vec![
+            "render",
+            "--builtin",
+            "cornell-box",
+            "--patch-size",
+            "0.3",
+            "--size",
+            "64x64",
+        ];
+        args.extend_from_slice(extra);
+        let stdout = run_ok(&args, &out);
+        let exr = image::open(out.join("frame.exr")).expect("exr").to_rgb32f();
+        (stdout, exr, render_json(&out))
+    };
+    let (_, fixed, report) = frame(&[], "static");
+    assert!(report["probes"].is_null(), "no dynamic node, no probes");
+    let block = [
+        "--dynamic",
+        "tall_block_side1",
+        "--dynamic",
+        "tall_block_side2",
+        "--dynamic",
+        "tall_block_side3",
+        "--dynamic",
+        "tall_block_side4",
+        "--dynamic",
+        "tall_block_top",
+    ];
+    let (stdout, moving, report) = frame(&block, "dynamic");
+    assert!(stdout.contains("5 dynamic surfaces lit by"), "{stdout}");
+    assert_eq!(report["probes"]["dynamic_surfaces"], 5);
+    assert!(report["probes"]["probes"].as_u64().expect("probes") > 1000);
+    // The block's front face, mid-height.
+    for (x, y) in [(24, 42), (20, 36), (28, 48)] {
+        let (a, b) = (moving.get_pixel(x, y).0, fixed.get_pixel(x, y).0);
+        assert!(a.iter().all(|&v| v > 0.0), "({x}, {y}) black: {a:?}");
+        // The solution without the block is brighter there (it no longer shades its own
+        // surroundings), but the light is the same light: within 2× and of the same colour.
+        let ratio = a[1] / b[1];
+        assert!((0.5..2.0).contains(&ratio), "({x}, {y}): {a:?} vs {b:?}");
+        for k in [0, 2] {
+            let (ca, cb) = (a[k] / a[1], b[k] / b[1]);
+            assert!(
+                (ca - cb).abs() <= 0.2 * cb,
+                "({x}, {y}) colour: {a:?} vs {b:?}"
+            );
+        }
+    }
+    // A node that is not there: one line that names some that are.
+    let st = radiant()
+        .args([
+            "render",
+            "--builtin",
+            "cornell-box",
+            "--dynamic",
+            "tall_blok",
+        ])
+        .arg("--out")
+        .arg(dir.join("typo"))
+        .output()
+        .expect("runs");
+    let stderr = String::from_utf8_lossy(&st.stderr);
+    assert!(!st.status.success());
+    assert!(
+        stderr.contains("no node of that name") && stderr.contains("tall_block_top"),
+        "{stderr}"
+    );
+}
+
 /// A reference image with no light, or with a value no radiance has, is refused in one line
 /// before anything is baked (it had given relative errors of 10^300 %).
 #[test]

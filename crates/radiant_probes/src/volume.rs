@@ -29,7 +29,18 @@ use radiant_radiosity::system::Rgb;
 use radiant_visibility::Visibility;
 use rayon::prelude::*;
 
+use radiant_radiosity::cluster::sh;
+
 use crate::{Lighting, Probe, ProbeBaker};
+
+/// The `i`-th of `n` points of a spherical Fibonacci lattice (equal areas, unit vectors).
+fn fibonacci(i: usize, n: usize) -> DVec3 {
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    let z = 1.0 - (2.0 * i as f64 + 1.0) / n as f64;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = golden * i as f64;
+    DVec3::new(r * phi.cos(), r * phi.sin(), z)
+}
 
 /// How a volume is laid out.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -128,6 +139,46 @@ impl ProbeVolume {
             lighting: baker.lighting.clone(),
         }
     }
+
+    /// Each probe's whole `H` (its harmonics, and its lights and emitters at the probe with the
+    /// probe's visibilities) as one function of the normal for a renderer to evaluate: order-2
+    /// real spherical harmonics of `H(n)` itself, `H(n) ≈ Σ_k c_k Y_k(n)` in
+    /// `radiant_radiosity::cluster::sh::basis`'s order, RGB per coefficient, and whether the
+    /// probe is valid (not inside geometry). The projection is over [`ProbeVolume::PROJECTION`]
+    /// normals on a spherical Fibonacci lattice. Where a probe sees a punctual light or an
+    /// emitter close by, order 2 smooths its sharp lobe (a sun's `max(0, n·l)` by up to 9 % of
+    /// its peak): the price of one function per probe; [`ProbeVolume::h`] keeps them exact.
+    pub fn h_harmonics(&self) -> Vec<([[f64; 3]; 9], bool)> {
+        let n = ProbeVolume::PROJECTION;
+        let normals: Vec<DVec3> = (0..n).map(|i| fibonacci(i, n)).collect();
+        let basis: Vec<[f64; 9]> = normals.iter().map(|&d| sh::basis(d)).collect();
+        let weight = 4.0 * std::f64::consts::PI / n as f64;
+        self.probes
+            .par_iter()
+            .map(|p| {
+                let mut c = [[0.0; 3]; 9];
+                if p.inside() {
+                    return (c, false);
+                }
+                let lights: Vec<f64> = p.lights.iter().map(|&v| f64::from(v)).collect();
+                let emitters: Vec<f64> = p.emitters.iter().map(|&v| f64::from(v)).collect();
+                for (d, y) in normals.iter().zip(&basis) {
+                    let h = self
+                        .lighting
+                        .evaluate(p.position, *d, &p.sh, &lights, &emitters);
+                    for (ck, yk) in c.iter_mut().zip(y) {
+                        for ch in 0..3 {
+                            ck[ch] += weight * h[ch] * yk;
+                        }
+                    }
+                }
+                (c, true)
+            })
+            .collect()
+    }
+
+    /// Normals [`ProbeVolume::h_harmonics`] projects over.
+    pub const PROJECTION: usize = 512;
 
     /// How many probes lie inside geometry (left out of the interpolation).
     pub fn inside(&self) -> usize {
