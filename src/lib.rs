@@ -92,22 +92,8 @@ pub mod bridge {
 
     /// Lights `render_scene`'s dynamic surfaces from `volume` (baked from the same scene's
     /// solution): each probe's whole `H` as order-2 harmonics
-    /// ([`radiant_probes::ProbeVolume::h_harmonics`]) on the renderer's grid, placed in world
-    /// units relative to the scene's origin.
+    /// ([`radiant_probes::ProbeVolume::h_harmonics`]) on the renderer's grid.
     pub fn light_dynamic(render_scene: &mut RenderScene, volume: &radiant_probes::ProbeVolume) {
-        let frame = volume.lighting.frame();
-        let origin = frame.to_world(volume.origin) - render_scene.origin;
-        let (sh, valid) = volume
-            .h_harmonics()
-            .into_iter()
-            .map(|(c, ok)| (c.map(|k| k.map(|v| v as f32)), ok))
-            .unzip();
-        render_scene.probes = Some(radiant_render::scene::ProbeGrid {
-            origin: origin.as_vec3().to_array(),
-            step: (volume.step * frame.scale) as f32,
-            dims: volume.dims.map(|d| d as u32),
-            sh,
-            valid,
-        });
+        radiant_ecs::render::light_dynamic(render_scene, volume, &volume.h_harmonics());
     }
 }

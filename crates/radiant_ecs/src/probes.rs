@@ -36,6 +36,9 @@ pub struct BakedProbes {
     pub generation: u64,
     /// The volume: read it with [`ProbeVolume::irradiance_world`].
     pub volume: Option<Arc<ProbeVolume>>,
+    /// Its probes' whole light as one function of the normal each, as the renderer draws
+    /// dynamic surfaces with it ([`ProbeVolume::h_harmonics`], made with the volume).
+    pub harmonics: Option<Arc<Harmonics>>,
     /// Seconds its sampling took (off the frame).
     pub seconds: f64,
     /// A newer volume is being sampled.
@@ -44,9 +47,15 @@ pub struct BakedProbes {
     pub published: u64,
 }
 
+/// Per probe, [`ProbeVolume::h_harmonics`]: nine RGB coefficients and whether it is valid.
+pub type Harmonics = Vec<([[f64; 3]; 9], bool)>;
+
+/// What the sampling task returns: the volume, its harmonics and the seconds they took.
+type Sampled = (ProbeVolume, Harmonics, f64);
+
 /// The task sampling a volume, and the light generation it samples.
 #[derive(Resource, Default)]
-struct ProbeTask(Option<(u64, Task<(ProbeVolume, f64)>)>);
+struct ProbeTask(Option<(u64, Task<Sampled>)>);
 
 /// System set of [`drive_probes`], after the bake's.
 #[derive(SystemSet, Clone, Debug, PartialEq, Eq, Hash)]
@@ -72,7 +81,7 @@ pub fn drive_probes(world: &mut World) {
         Some((_, task)) => check_ready(task),
         None => None,
     };
-    if let Some((volume, seconds)) = done {
+    if let Some((volume, harmonics, seconds)) = done {
         let generation = world
             .resource_mut::<ProbeTask>()
             .0
@@ -81,6 +90,7 @@ pub fn drive_probes(world: &mut World) {
         let mut p = world.resource_mut::<BakedProbes>();
         p.generation = generation;
         p.volume = Some(Arc::new(volume));
+        p.harmonics = Some(Arc::new(harmonics));
         p.seconds = seconds;
         p.published += 1;
     }
@@ -111,7 +121,8 @@ pub fn drive_probes(world: &mut World) {
         let vis = radiant_radiosity::input::visibility(&mesh, masks.as_ref());
         let baker = ProbeBaker::new(&scene, &mesh, &field, &vis, settings.probe);
         let volume = ProbeVolume::bake(&baker, &settings.volume);
-        (volume, t0.elapsed().as_secs_f64())
+        let harmonics = volume.h_harmonics();
+        (volume, harmonics, t0.elapsed().as_secs_f64())
     });
     world.resource_mut::<ProbeTask>().0 = Some((generation, task));
     world.resource_mut::<BakedProbes>().in_flight = true;

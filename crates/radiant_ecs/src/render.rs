@@ -82,6 +82,8 @@ pub struct RenderState {
     scene: Option<Arc<Scene>>,
     uploaded_generation: Option<u64>,
     uploaded_light: Option<Arc<Vec<Rgb>>>,
+    /// [`crate::probes::BakedProbes::published`] when the scene was last built.
+    uploaded_probes: u64,
     target: Option<(u32, u32, radiant_render::wgpu::Texture)>,
     /// Light maps uploaded so far.
     pub uploads: u64,
@@ -370,6 +372,29 @@ fn over_stored(rho: f64, factor: f64) -> f64 {
     if stored > 0.0 { rho / stored } else { 0.0 }
 }
 
+/// Lights `rs`'s dynamic surfaces from `volume` (baked from the same scene's solution) and its
+/// probes' `harmonics` ([`radiant_probes::ProbeVolume::h_harmonics`]): the renderer's probe
+/// grid, placed in world units relative to the scene's origin.
+pub fn light_dynamic(
+    rs: &mut RenderScene,
+    volume: &radiant_probes::ProbeVolume,
+    harmonics: &[([[f64; 3]; 9], bool)],
+) {
+    let frame = volume.lighting.frame();
+    let origin = frame.to_world(volume.origin) - rs.origin;
+    let (sh, valid) = harmonics
+        .iter()
+        .map(|(c, ok)| (c.map(|k| k.map(|v| v as f32)), *ok))
+        .unzip();
+    rs.probes = Some(radiant_render::scene::ProbeGrid {
+        origin: origin.as_vec3().to_array(),
+        step: (volume.step * frame.scale) as f32,
+        dims: volume.dims.map(|d| d as u32),
+        sh,
+        valid,
+    });
+}
+
 /// Drops the punctual lights from a scene lit by a bake's light map: their direct light (with
 /// shadows) is in the map already, and drawing them too would count it twice.
 pub fn lit_by_bake(rs: &mut RenderScene) {
@@ -464,6 +489,16 @@ fn build_scene(
             None => fill_lightmap_from_field(&mut rs, &scene, mesh, field),
         }
         lit_by_bake(&mut rs);
+    }
+    // Dynamic surfaces: the latest probes, when the world bakes them.
+    let probes = world
+        .get_resource::<crate::probes::BakedProbes>()
+        .map(|p| (p.published, p.volume.clone(), p.harmonics.clone()));
+    if let Some((published, volume, harmonics)) = probes {
+        if let (Some(v), Some(h)) = (volume, harmonics) {
+            light_dynamic(&mut rs, &v, &h);
+        }
+        world.resource_mut::<RenderState>().uploaded_probes = published;
     }
     let atlas = rs.atlas.as_ref().map(|a| AtlasReport {
         width: a.width,
@@ -620,7 +655,11 @@ pub fn prepare_frame(world: &mut World) -> Result<bool, RenderError> {
                     .uploaded_light
                     .as_ref()
                     .is_none_or(|old| max_rel_change(&light, old) >= settings.visible_change));
-        if state.renderer.is_none() || changes.scene || light_changed {
+        // New probes for the dynamic surfaces (built into the scene with the light map).
+        let probes_changed = world
+            .get_resource::<crate::probes::BakedProbes>()
+            .is_some_and(|p| p.published != state.uploaded_probes);
+        if state.renderer.is_none() || changes.scene || light_changed || probes_changed {
             let Some(rs) = build_scene(world, &settings)? else {
                 // Nothing to draw: keep looking until something is spawned.
                 world.resource_mut::<RenderChanges>().scene = true;

@@ -321,3 +321,52 @@ fn sharp_sun_shadow(at_once: u64) {
         &wrong[..wrong.len().min(6)]
     );
 }
+
+/// A mesh without [`Static`] is dynamic: left out of the bake, and drawn lit by the probes
+/// that follow it once they are published (black in the light map before: no chart).
+#[test]
+fn a_dynamic_mesh_is_lit_by_the_probes_once_they_follow_the_bake() {
+    let mut app = app(true);
+    app.insert_resource(ProbeVolumeBake::default());
+    let block: Vec<Entity> = app
+        .world
+        .query::<(Entity, &Name)>()
+        .iter(&app.world)
+        .filter(|(_, n)| n.as_str().starts_with("tall_block"))
+        .map(|(e, _)| e)
+        .collect();
+    assert_eq!(block.len(), 5);
+    for e in block {
+        app.world.entity_mut(e).remove::<Static>();
+    }
+    let cam = camera(&mut app);
+    app.world.entity_mut(cam).insert(DebugView::LightMap);
+    let t = std::time::Instant::now();
+    app.run_until(u64::MAX, Duration::from_millis(1), |w| {
+        let p = w.resource::<BakedProbes>();
+        (w.resource::<BakeStatus>().phase == BakePhase::Converged
+            && !w.resource::<BakeStatus>().stale
+            && p.generation == w.resource::<BakedLighting>().generation
+            && !p.in_flight)
+            || t.elapsed() > Duration::from_secs(90)
+    });
+    assert!(
+        app.world.resource::<BakedProbes>().harmonics.is_some(),
+        "no probes in 90 s"
+    );
+    app.update();
+    let img = app
+        .world
+        .resource::<LastFrame>()
+        .hdr
+        .clone()
+        .expect("captured");
+    // The block's front face, mid-height (the builtin camera at 64 × 64).
+    for (x, y) in [(24u32, 42u32), (20, 36), (28, 48)] {
+        let px = img.texels[(y * img.width + x) as usize];
+        assert!(
+            px[..3].iter().all(|&v| v > 0.005),
+            "({x}, {y}) not lit by the probes: {px:?}"
+        );
+    }
+}
