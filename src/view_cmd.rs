@@ -44,6 +44,11 @@ pub(crate) struct ViewArgs {
     /// would not fit one 8192² page.
     #[arg(long, value_parser = crate::args::parse_texel_density)]
     pub(crate) texel_density: Option<f64>,
+    /// A glTF node that moves (repeatable; as a node whose extras hold `{"radiant":
+    /// {"dynamic": true}}`): left out of the bake, lit by probes, moved with the arrow keys and
+    /// Page Up/Down.
+    #[arg(long, value_name = "NODE")]
+    pub(crate) dynamic: Vec<String>,
     #[command(flatten)]
     pub(crate) hierarchy: crate::HierarchyArgs,
     #[command(flatten)]
@@ -77,6 +82,7 @@ pub(crate) fn run(args: &ViewArgs) -> anyhow::Result<()> {
         }
     };
     crate::common::apply_sky(&mut scene, args.sky.as_deref())?;
+    crate::probes::mark_dynamic(&mut scene, &args.dynamic)?;
     let params = args.solve.params(args.method.0, args.form_factors.0)?;
     args.solve.init_threads()?;
     if let Some(dir) = args

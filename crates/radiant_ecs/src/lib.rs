@@ -55,7 +55,7 @@ pub mod prelude {
     pub use crate::scene::{
         Geometry, GlobalTransform, Material, MaterialTextures, PunctualLight, SceneCamera,
         SceneImages, ScenePlugin, SceneSky, Static, SurfaceOrder, Transform, TransformSystems,
-        gather_scene, spawn_scene,
+        gather_scene, move_dynamic, spawn_scene,
     };
     pub use bevy_ecs::prelude::*;
 }

@@ -240,6 +240,22 @@ pub fn propagate_transforms(
     }
 }
 
+/// Moves every dynamic mesh (a surface without [`Static`]) by `delta`, scene units, as a game
+/// moves what it owns: the bake does not see it, the renderer draws it again lit by the probes.
+/// Returns how many moved.
+pub fn move_dynamic(world: &mut World, delta: DVec3) -> usize {
+    if !delta.is_finite() || delta == DVec3::ZERO {
+        return 0;
+    }
+    let mut q = world.query_filtered::<&mut Transform, (With<Geometry>, Without<Static>)>();
+    let mut moved = 0;
+    for mut t in q.iter_mut(world) {
+        t.translation += delta;
+        moved += 1;
+    }
+    moved
+}
+
 /// The static surfaces, lights and camera as a radiosity scene, in world space: what the
 /// bake sees.
 pub fn gather_scene(world: &mut World) -> Scene {

@@ -369,4 +369,32 @@ fn a_dynamic_mesh_is_lit_by_the_probes_once_they_follow_the_bake() {
             "({x}, {y}) not lit by the probes: {px:?}"
         );
     }
+    // Moved as a game moves it: drawn where it went, with no rebake.
+    let generation = app.world.resource::<BakedLighting>().generation;
+    assert_eq!(
+        move_dynamic(&mut app.world, glam::DVec3::new(0.15, 0.0, 0.0)),
+        5
+    );
+    app.update();
+    app.update();
+    let moved = app
+        .world
+        .resource::<LastFrame>()
+        .hdr
+        .clone()
+        .expect("captured");
+    let changed = img
+        .texels
+        .iter()
+        .zip(&moved.texels)
+        .filter(|(a, b)| (a[0] - b[0]).abs() > 1e-3)
+        .count();
+    assert!(changed > 100, "{changed} pixels changed");
+    let status = app.world.resource::<BakeStatus>();
+    assert!(status.phase == BakePhase::Converged && !status.stale);
+    assert_eq!(
+        app.world.resource::<BakedLighting>().generation,
+        generation,
+        "a dynamic mesh's move is not a rebake"
+    );
 }

@@ -438,6 +438,62 @@ pub fn radiosity_panel(ui: &mut Ui, world: &mut World, _state: &mut InspectorSta
         .show(ui, |plot| {
             plot.line(Line::new("estimated error", PlotPoints::from(points)));
         });
+    probes_section(ui, world);
+}
+
+/// The probe grid that lights dynamic meshes, when the world bakes one: its size, and its
+/// probes seen from above (x, z), those inside geometry apart.
+fn probes_section(ui: &mut Ui, world: &mut World) {
+    let Some(probes) = world.get_resource::<radiant_ecs::probes::BakedProbes>() else {
+        return;
+    };
+    let Some(volume) = probes.volume.clone() else {
+        if probes.in_flight {
+            ui.label("Probes for dynamic meshes: sampling…");
+        }
+        return;
+    };
+    let frame = volume.lighting.frame();
+    let spacing = volume.step * frame.scale;
+    ui.separator();
+    ui.label(format!(
+        "Probes for dynamic meshes: {} × {} × {} = {}, {spacing:.3} apart, {} inside geometry, \
+         sampled in {:.2} s{}",
+        volume.dims[0],
+        volume.dims[1],
+        volume.dims[2],
+        volume.probes.len(),
+        volume.inside(),
+        probes.seconds,
+        if probes.in_flight {
+            " (newer ones sampling)"
+        } else {
+            ""
+        }
+    ));
+    let (mut valid, mut inside) = (Vec::new(), Vec::new());
+    for p in &volume.probes {
+        let w = frame.to_world(p.position);
+        if p.inside() {
+            inside.push([w.x, w.z]);
+        } else {
+            valid.push([w.x, w.z]);
+        }
+    }
+    Plot::new("probe_grid")
+        .height(140.0)
+        .data_aspect(1.0)
+        .x_axis_label("x")
+        .y_axis_label("z")
+        .allow_scroll(false)
+        .show(ui, |plot| {
+            plot.points(egui_plot::Points::new("probes", PlotPoints::from(valid)).radius(1.5));
+            plot.points(
+                egui_plot::Points::new("inside geometry", PlotPoints::from(inside))
+                    .radius(1.5)
+                    .color(Color32::from_rgb(230, 60, 50)),
+            );
+        });
 }
 
 /// Performance: frame time, per-pass times, and the compiled graph's textures.

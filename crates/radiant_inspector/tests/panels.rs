@@ -327,6 +327,50 @@ fn radiosity_panel_controls_the_bake() {
     );
 }
 
+/// With probes for dynamic meshes in the world, the radiosity tab shows their grid.
+#[test]
+fn radiosity_panel_shows_the_probe_grid() {
+    use radiant_probes::{ProbeParams, ProbeVolume, Solved, VolumeParams};
+    let scene = radiant_scene::builtin("cornell-box").expect("builtin scene");
+    let mut params = radiant_radiosity::BakeParams::default();
+    params.mesh.patch_size = 0.3;
+    let result = radiant_radiosity::Bake::new(&scene, &params)
+        .expect("bake")
+        .run_to_end(&mut |_| {})
+        .expect("solve");
+    let solved = Solved::new(&scene, &result);
+    let probe = ProbeParams {
+        strata: 4,
+        ..ProbeParams::default()
+    };
+    let volume = ProbeVolume::bake(
+        &solved.baker(&scene, &result.mesh, probe),
+        &VolumeParams {
+            spacing: Some(0.12),
+            ..VolumeParams::default()
+        },
+    );
+    let count = volume.probes.len();
+    let mut h = harness(Tab::Radiosity);
+    h.state_mut()
+        .world
+        .insert_resource(radiant_ecs::probes::BakedProbes {
+            generation: 1,
+            volume: Some(std::sync::Arc::new(volume)),
+            seconds: 0.5,
+            published: 1,
+            ..Default::default()
+        });
+    h.run();
+    let label = format!("= {count},");
+    assert!(
+        h.query_by_label_contains("Probes for dynamic meshes")
+            .is_some()
+            && h.query_by_label_contains(&label).is_some(),
+        "no probe grid of {count} probes in the panel"
+    );
+}
+
 #[test]
 fn performance_panel_shows_timings() {
     let mut h = harness(Tab::Performance);

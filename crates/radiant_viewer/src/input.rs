@@ -2,6 +2,8 @@
 
 use std::collections::HashSet;
 
+use glam::DVec3;
+
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
 use winit::keyboard::{KeyCode, PhysicalKey};
 
@@ -89,6 +91,18 @@ impl Input {
         None
     }
 
+    /// How far the dynamic meshes move in `dt` seconds with the arrow keys (x, z) and Page
+    /// Up/Down (y) held, at `speed` scene units a second; `None` when none is held.
+    pub(crate) fn nudge(&self, dt: f64, speed: f64) -> Option<DVec3> {
+        let k = |code: KeyCode| f64::from(u8::from(self.keys.contains(&code)));
+        let d = DVec3::new(
+            k(KeyCode::ArrowRight) - k(KeyCode::ArrowLeft),
+            k(KeyCode::PageUp) - k(KeyCode::PageDown),
+            k(KeyCode::ArrowDown) - k(KeyCode::ArrowUp),
+        );
+        (d != DVec3::ZERO).then_some(d * speed * dt)
+    }
+
     /// Flies the camera for `dt` seconds with WASD and Q/E held.
     pub(crate) fn fly(&self, dt: f64, camera: &mut OrbitCamera) {
         let k = |code: KeyCode| f64::from(u8::from(self.keys.contains(&code)));
@@ -99,5 +113,24 @@ impl Input {
             let speed = 0.8 * dt;
             camera.fly(right * speed, up * speed, forward * speed);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn arrows_and_page_keys_move_the_dynamic_meshes() {
+        let mut input = Input::default();
+        assert_eq!(input.nudge(0.5, 2.0), None);
+        input.keys.insert(KeyCode::ArrowRight);
+        input.keys.insert(KeyCode::PageUp);
+        input.keys.insert(KeyCode::ArrowUp);
+        assert_eq!(input.nudge(0.5, 2.0), Some(DVec3::new(1.0, 1.0, -1.0)));
+        input.keys.insert(KeyCode::ArrowLeft);
+        input.keys.insert(KeyCode::PageDown);
+        input.keys.insert(KeyCode::ArrowDown);
+        assert_eq!(input.nudge(0.5, 2.0), None, "opposite keys cancel");
     }
 }

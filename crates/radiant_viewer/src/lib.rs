@@ -2,6 +2,9 @@
 //! bake converges in the background, with the egui inspector drawn as the graph's last pass.
 //!
 //! - Left drag orbits, right drag looks around, the wheel zooms, WASD and Q/E fly.
+//! - The arrow keys and Page Up/Down move the scene's dynamic meshes (glTF nodes marked
+//!   `{"radiant": {"dynamic": true}}`), lit by the probes that follow the bake; the inspector's
+//!   radiosity tab shows the probe grid.
 //! - `Tab` (or `F1`) shows and hides the inspector; hidden, its pass and texture leave the graph.
 //! - Minimised or occluded (where the platform reports it: X11, Windows, macOS; Wayland does
 //!   not tell), nothing is rendered; the bake goes on.
@@ -156,6 +159,8 @@ struct Running {
     input: Input,
     timer: FrameTimer,
     minimised: bool,
+    /// How fast the arrow keys move dynamic meshes: a tenth of the scene's size a second.
+    move_speed: f64,
 }
 
 struct Viewer {
@@ -213,6 +218,7 @@ impl Viewer {
             input: Input::default(),
             timer: FrameTimer::new(),
             minimised: false,
+            move_speed: 0.1 * scene_extent(&self.options.scene),
         })
     }
 
@@ -229,6 +235,10 @@ impl Viewer {
                 ..RenderSettings::default()
             })
             .insert_resource(self.options.bake.clone());
+        // Probes only where something moves.
+        if self.options.scene.surfaces.iter().any(|s| s.dynamic) {
+            app.insert_resource(radiant_ecs::probes::ProbeVolumeBake::default());
+        }
         spawn_scene(&mut app.world, &self.options.scene);
         app.finish();
         app
@@ -303,6 +313,16 @@ fn viewer_camera(world: &mut World, scene: &Scene) -> (OrbitCamera, Option<Entit
     (initial_camera(world, camera_entity, scene), camera_entity)
 }
 
+/// The length of the scene's bounding box's diagonal (1 when it has none).
+fn scene_extent(scene: &Scene) -> f64 {
+    let (lo, hi) = scene.triangles.iter().flat_map(|t| t.vertices).fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(p), hi.max(p)),
+    );
+    let d = (hi - lo).length();
+    if d.is_finite() && d > 0.0 { d } else { 1.0 }
+}
+
 /// The orbit camera that reproduces the scene camera, orbiting the scene's centre.
 fn initial_camera(world: &mut World, camera: Option<Entity>, scene: &Scene) -> OrbitCamera {
     let (lo, hi) = scene.triangles.iter().flat_map(|t| t.vertices).fold(
@@ -361,7 +381,11 @@ impl Running {
     /// the render graph into the surface, present. False when no frame was presented.
     fn redraw(&mut self) -> Result<bool, RenderError> {
         let now = Instant::now();
-        self.input.fly(self.timer.dt(now), &mut self.camera);
+        let dt = self.timer.dt(now);
+        self.input.fly(dt, &mut self.camera);
+        if let Some(d) = self.input.nudge(dt, self.move_speed) {
+            radiant_ecs::scene::move_dynamic(&mut self.app.world, d);
+        }
         self.write_camera();
         self.app.update();
         apply_pending_overlay(&mut self.app.world);
