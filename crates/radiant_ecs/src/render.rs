@@ -84,6 +84,9 @@ pub struct RenderState {
     uploaded_light: Option<Arc<Vec<Rgb>>>,
     /// [`crate::probes::BakedProbes::published`] when the scene was last built.
     uploaded_probes: u64,
+    /// Light-map atlases made so far (UV charts: a new light, a material or a moved dynamic
+    /// mesh keeps the last one).
+    pub atlases: u64,
     target: Option<(u32, u32, radiant_render::wgpu::Texture)>,
     /// Light maps uploaded so far.
     pub uploads: u64,
@@ -440,6 +443,21 @@ pub fn extract_settings(world: &mut World) -> FrameSettings {
     }
 }
 
+/// Whether `a` and `b` hold the same triangles but for where their dynamic ones are: a moved
+/// dynamic mesh keeps the atlas (its charts are never read: it is lit by probes).
+fn same_static_triangles(a: &Scene, b: &Scene) -> bool {
+    let dynamic = |s: &Scene, t: &radiant_scene::Triangle| {
+        s.surfaces
+            .get(t.surface as usize)
+            .is_some_and(|s| s.dynamic)
+    };
+    a.triangles.len() == b.triangles.len()
+        && a.triangles
+            .iter()
+            .zip(&b.triangles)
+            .all(|(x, y)| x == y || (x.surface == y.surface && dynamic(a, x) && dynamic(b, y)))
+}
+
 /// The render scene with the baked light, or `None` for a world with nothing to draw yet.
 fn build_scene(
     world: &mut World,
@@ -456,7 +474,7 @@ fn build_scene(
     let reuse = match (&state.last_atlas, &state.scene) {
         (Some((density, atlas)), Some(old))
             if *density == settings.texel_density
-                && old.triangles == scene.triangles
+                && same_static_triangles(old, &scene)
                 && old.surfaces.len() == scene.surfaces.len()
                 && old
                     .surfaces
@@ -470,7 +488,10 @@ fn build_scene(
     };
     let mut rs = match reuse {
         Some(atlas) => RenderScene::with_atlas(&scene, atlas)?,
-        None => RenderScene::from_scene(&scene, settings.texel_density)?,
+        None => {
+            world.resource_mut::<RenderState>().atlases += 1;
+            RenderScene::from_scene(&scene, settings.texel_density)?
+        }
     };
     if let (Some(mesh), Some(field)) = (&lit.mesh, &lit.field)
         && !lit.radiosity.is_empty()

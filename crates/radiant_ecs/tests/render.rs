@@ -369,8 +369,9 @@ fn a_dynamic_mesh_is_lit_by_the_probes_once_they_follow_the_bake() {
             "({x}, {y}) not lit by the probes: {px:?}"
         );
     }
-    // Moved as a game moves it: drawn where it went, with no rebake.
+    // Moved as a game moves it: drawn where it went, with no rebake and no new atlas.
     let generation = app.world.resource::<BakedLighting>().generation;
+    let atlases = app.world.resource::<RenderState>().atlases;
     assert_eq!(
         move_dynamic(&mut app.world, glam::DVec3::new(0.15, 0.0, 0.0)),
         5
@@ -396,5 +397,10 @@ fn a_dynamic_mesh_is_lit_by_the_probes_once_they_follow_the_bake() {
         app.world.resource::<BakedLighting>().generation,
         generation,
         "a dynamic mesh's move is not a rebake"
+    );
+    assert_eq!(
+        app.world.resource::<RenderState>().atlases,
+        atlases,
+        "a dynamic mesh's move keeps the atlas"
     );
 }
