@@ -5,6 +5,10 @@
 //! into an irradiance volume ([`radiant_probes::ProbeVolume`]) by a task on bevy's
 //! `AsyncComputeTaskPool`; [`BakedProbes`] holds the latest. The frame never waits: a volume
 //! in flight is picked up by a later frame, and a light published meanwhile is sampled next.
+//! Each new light gets a preview volume first (a sixteenth of the rays, within the light map's
+//! edit budget on the Cornell box:
+//! [`ProbeVolumeBake::preview_strata`]), so moved geometry relights the probes soon, then the
+//! full volume for the same light replaces it ([`BakedProbes::preview`] tells which is shown).
 //! Without [`ProbeVolumeBake`] nothing is sampled and nothing allocated: a scene with nothing
 //! that moves does not pay for probes.
 
@@ -21,12 +25,34 @@ use crate::scene::gather_scene;
 
 /// Probes for the world's dynamic meshes. Present → a volume follows the bake's light; absent
 /// → none is made.
-#[derive(Resource, Clone, Copy, Debug, Default)]
+#[derive(Resource, Clone, Copy, Debug)]
 pub struct ProbeVolumeBake {
     /// The grid (default: a sixteenth of the scene's longest extent apart).
     pub volume: VolumeParams,
     /// Each probe's rays.
     pub probe: ProbeParams,
+    /// For each new light, first a preview volume with this many strata per probe (fewer rays,
+    /// published sooner), then the full one (`None`: the full one alone). Default
+    /// [`ProbeVolumeBake::PREVIEW_STRATA`].
+    pub preview_strata: Option<u32>,
+}
+
+impl ProbeVolumeBake {
+    /// The preview's strata: 8 (128 rays a probe against 2048). On the Cornell box (4913
+    /// probes, release, 2 cores) the preview took 0.14 s against 1.24 s for the full volume, and
+    /// read 2.0 % mean, 6.3 % worst from it beside the short block (12 strata: 0.26 s, 0.4 %
+    /// and 1.2 %).
+    pub const PREVIEW_STRATA: u32 = 8;
+}
+
+impl Default for ProbeVolumeBake {
+    fn default() -> Self {
+        ProbeVolumeBake {
+            volume: VolumeParams::default(),
+            probe: ProbeParams::default(),
+            preview_strata: Some(Self::PREVIEW_STRATA),
+        }
+    }
 }
 
 /// The latest irradiance volume.
@@ -43,6 +69,8 @@ pub struct BakedProbes {
     pub seconds: f64,
     /// A newer volume is being sampled.
     pub in_flight: bool,
+    /// The volume is the preview of its light (fewer rays); the full one follows.
+    pub preview: bool,
     /// Volumes published so far.
     pub published: u64,
 }
@@ -53,9 +81,9 @@ pub type Harmonics = Vec<([[f64; 3]; 9], bool)>;
 /// What the sampling task returns: the volume, its harmonics and the seconds they took.
 type Sampled = (ProbeVolume, Harmonics, f64);
 
-/// The task sampling a volume, and the light generation it samples.
+/// The task sampling a volume, the light generation it samples and whether it is a preview.
 #[derive(Resource, Default)]
-struct ProbeTask(Option<(u64, Task<Sampled>)>);
+struct ProbeTask(Option<(u64, bool, Task<Sampled>)>);
 
 /// System set of [`drive_probes`], after the bake's.
 #[derive(SystemSet, Clone, Debug, PartialEq, Eq, Hash)]
@@ -78,20 +106,21 @@ impl Plugin for ProbePlugin {
 /// flight (see the module).
 pub fn drive_probes(world: &mut World) {
     let done = match &mut world.resource_mut::<ProbeTask>().0 {
-        Some((_, task)) => check_ready(task),
+        Some((_, _, task)) => check_ready(task),
         None => None,
     };
     if let Some((volume, harmonics, seconds)) = done {
-        let generation = world
+        let (generation, preview) = world
             .resource_mut::<ProbeTask>()
             .0
             .take()
-            .map_or(0, |(g, _)| g);
+            .map_or((0, false), |(g, p, _)| (g, p));
         let mut p = world.resource_mut::<BakedProbes>();
         p.generation = generation;
         p.volume = Some(Arc::new(volume));
         p.harmonics = Some(Arc::new(harmonics));
         p.seconds = seconds;
+        p.preview = preview;
         p.published += 1;
     }
     let running = world.resource::<ProbeTask>().0.is_some();
@@ -107,23 +136,37 @@ pub fn drive_probes(world: &mut World) {
     let (Some(mesh), Some(field)) = (lighting.mesh.clone(), lighting.field.clone()) else {
         return;
     };
-    if generation <= world.resource::<BakedProbes>().generation
-        || preview
-        || world.resource::<BakeStatus>().stale
-    {
+    if preview || world.resource::<BakeStatus>().stale {
         return;
     }
+    let published = world.resource::<BakedProbes>();
+    // A new light: its preview first (when asked); the light of a preview: the full volume.
+    let probe = if generation > published.generation {
+        match settings.preview_strata {
+            Some(strata) if strata < settings.probe.strata => ProbeParams {
+                strata: strata.max(1),
+                ..settings.probe
+            },
+            _ => settings.probe,
+        }
+    } else if generation == published.generation && published.preview {
+        settings.probe
+    } else {
+        return;
+    };
+    let is_preview = probe.strata < settings.probe.strata;
     // The light matches the world's scene now (not stale): the scene its mesh was made from.
     let scene = gather_scene(world);
+    let volume_params = settings.volume;
     let task = AsyncComputeTaskPool::get().spawn(async move {
         let t0 = Instant::now();
         let masks = radiant_radiosity::input::masks(&scene);
         let vis = radiant_radiosity::input::visibility(&mesh, masks.as_ref());
-        let baker = ProbeBaker::new(&scene, &mesh, &field, &vis, settings.probe);
-        let volume = ProbeVolume::bake(&baker, &settings.volume);
+        let baker = ProbeBaker::new(&scene, &mesh, &field, &vis, probe);
+        let volume = ProbeVolume::bake(&baker, &volume_params);
         let harmonics = volume.h_harmonics();
         (volume, harmonics, t0.elapsed().as_secs_f64())
     });
-    world.resource_mut::<ProbeTask>().0 = Some((generation, task));
+    world.resource_mut::<ProbeTask>().0 = Some((generation, is_preview, task));
     world.resource_mut::<BakedProbes>().in_flight = true;
 }

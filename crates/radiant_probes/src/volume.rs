@@ -178,7 +178,7 @@ impl ProbeVolume {
     }
 
     /// Normals [`ProbeVolume::h_harmonics`] projects over.
-    pub const PROJECTION: usize = 512;
+    pub const PROJECTION: usize = 128;
 
     /// How many probes lie inside geometry (left out of the interpolation).
     pub fn inside(&self) -> usize {
