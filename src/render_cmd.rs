@@ -146,7 +146,15 @@ fn bake(
             baking::bake_triangles(scene, params, checkpoint)?
         }))
     } else {
-        println!("{source}: no emitters, so no bake; the frame shows punctual lights and emission");
+        let dynamic_only = scene.surfaces.iter().any(|s| s.dynamic && s.is_emitter());
+        println!(
+            "{source}: no emitters{}, so no bake; the frame shows punctual lights and emission",
+            if dynamic_only {
+                " among the static surfaces (dynamic ones are not baked)"
+            } else {
+                ""
+            }
+        );
         Ok(None)
     }
 }

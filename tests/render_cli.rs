@@ -288,6 +288,25 @@ fn a_dynamic_node_is_lit_by_the_probes() {
             );
         }
     }
+    // A dynamic emitter is not baked: with the box's only one dynamic, nothing is.
+    let out = dir.join("dynamic-light");
+    let stdout = run_ok(
+        &[
+            "render",
+            "--builtin",
+            "cornell-box",
+            "--size",
+            "16x16",
+            "--dynamic",
+            "light",
+        ],
+        &out,
+    );
+    assert!(
+        stdout.contains("no emitters among the static surfaces"),
+        "{stdout}"
+    );
+    assert_eq!(render_json(&out)["baked"], false);
     // A node that is not there: one line that names some that are.
     let st = radiant()
         .args([

@@ -422,15 +422,17 @@ pub struct Scene {
 }
 
 impl Scene {
-    /// Whether anything emits light: an emissive surface with triangles, a punctual light, or
-    /// a sky that is not dark.
+    /// Whether anything emits light into a bake: an emissive static surface with triangles, a
+    /// punctual light, or a sky that is not dark. A dynamic surface is not baked, so its
+    /// emission does not count.
     pub fn has_emitters(&self) -> bool {
         !self.lights.is_empty()
             || self.sky.as_ref().is_some_and(|s| !s.is_dark())
-            || self
-                .triangles
-                .iter()
-                .any(|t| self.surfaces[t.surface as usize].is_emitter())
+            || self.triangles.iter().any(|t| {
+                self.surfaces
+                    .get(t.surface as usize)
+                    .is_some_and(|s| s.is_emitter() && !s.dynamic)
+            })
     }
 
     /// The same scene without the triangles of dynamic surfaces (the surfaces stay, so indices
@@ -686,5 +688,12 @@ mod tests {
         let static_part = scene.static_part();
         assert_eq!(static_part.surfaces.len(), scene.surfaces.len());
         assert_eq!(static_part.triangles.len(), scene.triangles.len() - 10);
+        // A dynamic emitter is not baked: with the only one dynamic, nothing emits into a bake.
+        let mut lamp = scene.clone();
+        assert!(lamp.has_emitters());
+        for s in &mut lamp.surfaces {
+            s.dynamic |= s.is_emitter();
+        }
+        assert!(!lamp.has_emitters());
     }
 }
