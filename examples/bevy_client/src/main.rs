@@ -401,39 +401,25 @@ fn unbake_lights(
     keep: Res<KeepBakedLights>,
     mut found: ResMut<Found>,
 ) {
-    for (entity, mut l, e) in &mut points {
-        if baked(e) {
-            found.baked_lights += 1;
-            if keep.0 {
-                l.affects_lightmapped_mesh_diffuse = false;
-                l.shadow_maps_enabled = true;
-            } else {
-                commands.entity(entity).remove::<PointLight>();
+    // The three kinds share the fields this touches, not a trait.
+    macro_rules! unbake {
+        ($query:ident, $kind:ty) => {
+            for (entity, mut l, e) in &mut $query {
+                if baked(e) {
+                    found.baked_lights += 1;
+                    if keep.0 {
+                        l.affects_lightmapped_mesh_diffuse = false;
+                        l.shadow_maps_enabled = true;
+                    } else {
+                        commands.entity(entity).remove::<$kind>();
+                    }
+                }
             }
-        }
+        };
     }
-    for (entity, mut l, e) in &mut spots {
-        if baked(e) {
-            found.baked_lights += 1;
-            if keep.0 {
-                l.affects_lightmapped_mesh_diffuse = false;
-                l.shadow_maps_enabled = true;
-            } else {
-                commands.entity(entity).remove::<SpotLight>();
-            }
-        }
-    }
-    for (entity, mut l, e) in &mut suns {
-        if baked(e) {
-            found.baked_lights += 1;
-            if keep.0 {
-                l.affects_lightmapped_mesh_diffuse = false;
-                l.shadow_maps_enabled = true;
-            } else {
-                commands.entity(entity).remove::<DirectionalLight>();
-            }
-        }
-    }
+    unbake!(points, PointLight);
+    unbake!(spots, SpotLight);
+    unbake!(suns, DirectionalLight);
 }
 
 /// Box-filters the captured frame by `ss` and writes it as a linear RGBA float EXR.
