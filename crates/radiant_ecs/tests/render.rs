@@ -355,12 +355,14 @@ fn a_dynamic_mesh_is_lit_by_the_probes_once_they_follow_the_bake() {
         "no probes in 90 s"
     );
     app.update();
-    let img = app
-        .world
-        .resource::<LastFrame>()
-        .hdr
-        .clone()
-        .expect("captured");
+    let frame = |app: &App| {
+        app.world
+            .resource::<LastFrame>()
+            .hdr
+            .clone()
+            .expect("captured")
+    };
+    let img = frame(&app);
     // The block's front face, mid-height (the builtin camera at 64 × 64).
     for (x, y) in [(24u32, 42u32), (20, 36), (28, 48)] {
         let px = img.texels[(y * img.width + x) as usize];
@@ -378,12 +380,7 @@ fn a_dynamic_mesh_is_lit_by_the_probes_once_they_follow_the_bake() {
     );
     app.update();
     app.update();
-    let moved = app
-        .world
-        .resource::<LastFrame>()
-        .hdr
-        .clone()
-        .expect("captured");
+    let moved = frame(&app);
     let changed = img
         .texels
         .iter()
