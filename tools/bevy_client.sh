@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # A real engine renders Radiant's export (issue 53): bakes the Cornell box (or SCENE.glb's
 # source) with `radiant bake --export`, builds the Bevy client in examples/bevy_client (its own
-# workspace, outside CI: the first build takes 15-30 minutes on 2 cores), captures its frame
+# workspace, outside CI: the first build takes 15-20 minutes on 2 cores), captures its frame
 # headless on lavapipe, and compares it with `radiant render`'s frame from the same camera
 # (`--reference-image`: radiance, no SSAO, no bloom, 4x4 supersampled; surfaces with the
 # emitter's pixels left out).
