@@ -283,11 +283,13 @@ pub struct ProbeGrid {
 impl ProbeGrid {
     /// Checks the layout and the values (typed error: no NaN reaches the GPU).
     pub fn validate(&self) -> Result<(), RenderError> {
-        let count = self.dims.iter().map(|&d| d as u64).product::<u64>();
+        // u128: three u32 sides cannot overflow it. The shader indexes nine words a probe in
+        // u32, so at most u32::MAX / 9 probes.
+        let count: u128 = self.dims.iter().map(|&d| u128::from(d)).product();
         if self.dims.contains(&0)
-            || count != self.sh.len() as u64
-            || count != self.valid.len() as u64
-            || count > u64::from(u32::MAX)
+            || count != self.sh.len() as u128
+            || count != self.valid.len() as u128
+            || count > u128::from(u32::MAX / 9)
         {
             return Err(RenderError::ProbeLayout {
                 dims: self.dims,
@@ -1349,6 +1351,28 @@ use bytemuck::Zeroable as _;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A probe grid whose sides multiply past any count is a typed error, not an overflow.
+    #[test]
+    fn a_huge_or_short_probe_grid_is_a_typed_error() {
+        let grid = |dims: [u32; 3], n: usize| ProbeGrid {
+            origin: [0.0; 3],
+            step: 1.0,
+            dims,
+            sh: vec![[[0.0; 3]; 9]; n],
+            valid: vec![true; n],
+        };
+        assert!(grid([2, 1, 1], 2).validate().is_ok());
+        for (dims, n) in [([u32::MAX; 3], 1), ([3, 1, 1], 2), ([0, 1, 1], 0)] {
+            assert!(matches!(
+                grid(dims, n).validate(),
+                Err(RenderError::ProbeLayout { .. })
+            ));
+        }
+        let mut nan = grid([1, 1, 1], 1);
+        nan.sh[0][4][1] = f32::NAN;
+        assert!(matches!(nan.validate(), Err(RenderError::NonFinite(_))));
+    }
 
     #[test]
     fn f16_round_trip() {

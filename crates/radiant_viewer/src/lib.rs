@@ -313,22 +313,24 @@ fn viewer_camera(world: &mut World, scene: &Scene) -> (OrbitCamera, Option<Entit
     (initial_camera(world, camera_entity, scene), camera_entity)
 }
 
-/// The length of the scene's bounding box's diagonal (1 when it has none).
-fn scene_extent(scene: &Scene) -> f64 {
-    let (lo, hi) = scene.triangles.iter().flat_map(|t| t.vertices).fold(
+/// The scene's bounding box (infinite corners without triangles).
+fn bounds(scene: &Scene) -> (DVec3, DVec3) {
+    scene.triangles.iter().flat_map(|t| t.vertices).fold(
         (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
         |(lo, hi), p| (lo.min(p), hi.max(p)),
-    );
+    )
+}
+
+/// The length of the scene's bounding box's diagonal (1 when it has none).
+fn scene_extent(scene: &Scene) -> f64 {
+    let (lo, hi) = bounds(scene);
     let d = (hi - lo).length();
     if d.is_finite() && d > 0.0 { d } else { 1.0 }
 }
 
 /// The orbit camera that reproduces the scene camera, orbiting the scene's centre.
 fn initial_camera(world: &mut World, camera: Option<Entity>, scene: &Scene) -> OrbitCamera {
-    let (lo, hi) = scene.triangles.iter().flat_map(|t| t.vertices).fold(
-        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
-        |(lo, hi), p| (lo.min(p), hi.max(p)),
-    );
+    let (lo, hi) = bounds(scene);
     let centre = if lo.is_finite() && hi.is_finite() {
         (lo + hi) * 0.5
     } else {
