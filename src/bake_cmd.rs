@@ -555,6 +555,7 @@ fn report_json(
                 "stride": g.stride,
                 "radius": g.filter_radius,
                 "element_passes": g.element_passes,
+                "lights_at_hits": g.lights_at_hits,
                 "emitter_samples": g.emitter_samples,
             })),
             "write_seconds": w.write_s,

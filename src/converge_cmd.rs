@@ -526,9 +526,10 @@ fn lightmap_curve(
         atlas.width, atlas.height, atlas.pages
     );
     let mut csv = String::from(
-        "light_map,strata,stride,radius,element_passes,bake_s,lightmap_s,t_s,surfaces_mean_rel_error,surfaces_max_rel_error,points_median_rel_error,points_mean_rel_error,points_max_rel_error\n",
+        "light_map,strata,stride,radius,element_passes,bake_s,lightmap_s,t_s,surfaces_mean_rel_error,surfaces_max_rel_error,points_median_rel_error,points_mean_rel_error,points_max_rel_error,lights_at_hits\n",
     );
-    let (mut by_surfaces, mut by_points) = (Vec::new(), Vec::new());
+    let (mut by_surfaces, mut by_points, mut by_points_median) =
+        (Vec::new(), Vec::new(), Vec::new());
     for &strata in &args.light_maps {
         let g = args.gather.params(strata, params.ff.seed);
         let t = Instant::now();
@@ -566,7 +567,7 @@ fn lightmap_curve(
         let f = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6e}"));
         let _ = writeln!(
             csv,
-            "{name},{strata},{},{},{},{bake_s:.6},{lightmap_s:.6},{t_s:.6},{},{},{},{},{}",
+            "{name},{strata},{},{},{},{bake_s:.6},{lightmap_s:.6},{t_s:.6},{},{},{},{},{},{}",
             g.stride,
             g.filter_radius,
             g.element_passes,
@@ -575,6 +576,11 @@ fn lightmap_curve(
             f(points.as_ref().map(|c| c.median_rel)),
             f(points.as_ref().map(|c| c.mean_rel)),
             f(points.as_ref().map(|c| c.max_rel)),
+            if strata == 0 {
+                String::new()
+            } else {
+                g.lights_at_hits.to_string()
+            },
         );
         let pct = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{:.2} %", v * 100.0));
         println!(
@@ -589,6 +595,7 @@ fn lightmap_curve(
         }
         if let Some(c) = &points {
             by_points.push((t_s, c.mean_rel));
+            by_points_median.push((t_s, c.median_rel));
         }
     }
     write_atomic(&args.out.join("lightmap_convergence.csv"), csv.as_bytes())?;
@@ -596,6 +603,7 @@ fn lightmap_curve(
     for (label, points) in [
         ("surfaces (mean)", by_surfaces),
         ("points (mean)", by_points),
+        ("points (median)", by_points_median),
     ] {
         if !points.is_empty() {
             curves.push(Curve {

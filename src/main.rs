@@ -228,8 +228,10 @@ impl LightMapArgs {
 /// How a final gather samples (`bake --final-gather`, `converge --light-maps`).
 #[derive(Args, Debug, Clone, Copy)]
 pub(crate) struct GatherArgs {
-    /// With a final gather: rays are shot at every N-th texel along each axis, and each texel
-    /// takes the mean of those within --gather-radius on its surface (1: at every texel).
+    /// With a final gather: rays are shot at every N-th texel along each axis, then on finer
+    /// lattices down to every second texel where none of those stands for them (near walls
+    /// and contacts, small charts; Ward's irradiance caching), and each texel takes the mean
+    /// of those within --gather-radius (at least N) on its surface (1: at every texel).
     #[arg(long, value_name = "N", default_value_t = GatherParams::default().stride,
           value_parser = clap::value_parser!(u32).range(1..=16))]
     pub(crate) gather_stride: u32,
@@ -244,6 +246,11 @@ pub(crate) struct GatherArgs {
     #[arg(long, value_name = "N", default_value_t = 0,
           value_parser = clap::value_parser!(u32).range(0..=8))]
     pub(crate) gather_passes: u32,
+    /// With a final gather: where a ray meets a surface, read the punctual lights' light
+    /// there from the elements (their mean, smeared across shadow edges) instead of a shadow
+    /// ray from the point met (the default; one more ray where a light faces the point).
+    #[arg(long)]
+    pub(crate) gather_lights_from_elements: bool,
 }
 
 impl GatherArgs {
@@ -256,6 +263,7 @@ impl GatherArgs {
             stride: self.gather_stride,
             filter_radius: self.gather_radius.max(self.gather_stride),
             element_passes: self.gather_passes,
+            lights_at_hits: !self.gather_lights_from_elements,
             ..GatherParams::default()
         }
     }

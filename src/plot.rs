@@ -81,7 +81,7 @@ pub fn plot_convergence(curves: &[Curve], title: &str) -> anyhow::Result<Vec<u8>
         chart
             .configure_mesh()
             .x_desc("wall time (s), form factors included")
-            .y_desc("mean relative error")
+            .y_desc("relative error (each curve says which)")
             .y_label_formatter(&|v| format!("{:.2} %", v * 100.0))
             .x_label_formatter(&|v| {
                 let s = format!("{v:.3}");

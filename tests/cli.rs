@@ -1123,6 +1123,9 @@ fn converge_measures_light_maps_against_time() {
     assert_eq!((rows[0][0], rows[1][0]), ("smooth", "gather"));
     // strata, stride, radius (at least the stride), element passes.
     assert_eq!(&rows[1][1..5], &["2", "1", "2", "0"]);
+    // The sun's bounce taken where the gather's rays land (the default); nothing for the
+    // smooth field.
+    assert_eq!((rows[0][13], rows[1][13]), ("", "true"));
     for r in &rows {
         let t: f64 = r[7].parse().expect("t_s");
         let surfaces: f64 = r[8].parse().expect("surfaces' error");

@@ -22,7 +22,7 @@
 //! so a gather gives the same bits on any thread count.
 
 use glam::DVec3;
-use radiant_scene::{Scene, Sky};
+use radiant_scene::{Light, Scene, Sky};
 use radiant_visibility::Visibility;
 
 use crate::form_factors::analytic::point_to_triangle;
@@ -55,19 +55,28 @@ pub struct GatherParams {
     /// Seed of the rays.
     pub seed: u64,
     /// The rays' part is averaged over the gathered texels of the same surface within this
-    /// many texels (a `(2r + 1)²` window, normals within 25°) whose rays' harmonic mean
+    /// many texels, and at least `stride` (a `(2r + 1)²` window, normals within 25°) whose rays' harmonic mean
     /// distance is at least twice as far ([`VALID`]: Ward's irradiance caching): the noise
     /// falls as if each texel had shot as many rays as it averages, and where geometry is near
     /// (a contact) the average shrinks to the texels that see it alike.
     pub filter_radius: u32,
     /// Rays are shot at every `stride`-th texel along each axis of the atlas (1: at every
-    /// texel) and the filter spreads them to the others; a texel with no such neighbour on its
-    /// surface (a chart of a few texels) shoots its own.
+    /// texel), then on lattices twice as fine down to every second texel, at each texel
+    /// of a finer lattice that none gathered so far stands for (Ward's irradiance caching:
+    /// nearer than [`VALID`] of its rays' harmonic mean distance, on its surface and plane):
+    /// the open floor keeps the coarsest lattice, a contact or a chart of a few texels goes
+    /// down to the finest. The filter spreads them to the others.
     pub stride: u32,
     /// Gathers at the elements before the texels' ([`regather_elements`]): each pass gives
     /// every element the light its own points gather from the last pass's solution (0: the
     /// solve's light as it is).
     pub element_passes: u32,
+    /// Where a ray meets a surface, the punctual lights' direct light there is computed
+    /// again with a shadow ray from the point it met ([`FinalGather::with_lights_at_hits`]),
+    /// instead of read from the elements' (their nine points' mean, smeared across a shadow
+    /// edge and interpolated across their neighbours): the sun's first bounce as sharp as the
+    /// gather's rays. False: the solution's light as the field holds it.
+    pub lights_at_hits: bool,
 }
 
 impl Default for GatherParams {
@@ -80,6 +89,7 @@ impl Default for GatherParams {
             filter_radius: 2,
             stride: 2,
             element_passes: 0,
+            lights_at_hits: true,
         }
     }
 }
@@ -193,23 +203,48 @@ impl Emitters {
         origin: DVec3,
         d: DVec3,
     ) -> (Rgb, f64, bool) {
+        let (l, t, inside, _) = self.trace(mesh, field, vis, sky, origin, d);
+        (l, t, inside)
+    }
+
+    /// [`Self::along`], and where the ray met a surface from its lit side, the element it met
+    /// and that face's unit normal toward the ray's origin.
+    fn trace(
+        &self,
+        mesh: &Mesh,
+        field: &SmoothField,
+        vis: &impl Visibility,
+        sky: Option<&Sky>,
+        origin: DVec3,
+        d: DVec3,
+    ) -> (Rgb, f64, bool, Option<(u32, DVec3)>) {
         match vis.closest_hit(origin.as_vec3(), d.as_vec3(), f32::INFINITY) {
             Some(hit) => {
                 let (root, t) = (hit.triangle as usize, f64::from(hit.t));
                 if root >= mesh.roots.len() {
-                    return ([0.0; 3], t, false);
+                    return ([0.0; 3], t, false, None);
                 }
                 if !hit.front && !self.double_sided[root] {
-                    return ([0.0; 3], t, true);
+                    return ([0.0; 3], t, true, None);
                 }
-                let b = field.radiosity(mesh, hit.triangle, f64::from(hit.u), f64::from(hit.v));
+                let (leaf, w) =
+                    mesh.locate_weights(hit.triangle, f64::from(hit.u), f64::from(hit.v));
+                let b = field.radiosity_in(leaf, w);
                 let e = self.root_emission[root];
-                (std::array::from_fn(|k| (b[k] - e[k]).max(0.0)), t, false)
+                let normal = mesh.nodes[mesh.roots[root] as usize].normal;
+                let normal = if hit.front { normal } else { -normal };
+                (
+                    std::array::from_fn(|k| (b[k] - e[k]).max(0.0)),
+                    t,
+                    false,
+                    Some((leaf, normal)),
+                )
             }
             None => (
                 sky.map_or([0.0; 3], |s| s.radiance(d)),
                 f64::INFINITY,
                 false,
+                None,
             ),
         }
     }
@@ -223,6 +258,9 @@ pub struct FinalGather<'a, V> {
     params: GatherParams,
     emitters: Emitters,
     sky: Option<Sky>,
+    /// The punctual lights (and their positions in the mesh's frame) whose direct light a ray
+    /// takes at the point it meets; empty: the field's.
+    hit_lights: Vec<(Light, DVec3)>,
 }
 
 impl<'a, V: Visibility> FinalGather<'a, V> {
@@ -242,7 +280,22 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
             params,
             emitters: Emitters::new(scene, mesh),
             sky: scene.sky.clone().filter(|s| !s.is_dark()),
+            hit_lights: Vec::new(),
         }
+    }
+
+    /// The same gather, but where a ray meets a surface it takes `scene`'s punctual lights'
+    /// direct light at that point, with a shadow ray each, on top of the field, so the field
+    /// must be the solution's light **without** the elements' direct part (`field.minus` of
+    /// [`crate::texel_light::TexelLights::element_direct`]): `E + ρ (H_rest + D(p) / π)` at the
+    /// point `p` met, ρ its element's reflectance.
+    pub fn with_lights_at_hits(mut self, scene: &Scene) -> Self {
+        let frame = self.mesh.frame;
+        self.hit_lights = (scene.lights.iter())
+            .filter(|l| l.intensity > 0.0)
+            .map(|l| (l.clone(), frame.to_local(l.position)))
+            .collect();
+        self
     }
 
     /// `H` at `x` (the mesh's frame) on a surface of unit normal `n`, from the solution, the
@@ -296,6 +349,9 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
     /// The reflected radiance (and the sky's) a ray from `origin` along unit `d` meets.
     /// And how far it went (infinite when it left the scene).
     fn radiance(&self, origin: DVec3, d: DVec3) -> (Rgb, f64) {
+        if !self.hit_lights.is_empty() {
+            return self.radiance_lit(origin, d);
+        }
         let (l, t, _) = self.emitters.along(
             self.mesh,
             self.field,
@@ -304,6 +360,42 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
             origin,
             d,
         );
+        (l, t)
+    }
+
+    /// [`Self::radiance`] with the punctual lights' direct light taken where the ray lands
+    /// (see [`Self::with_lights_at_hits`]).
+    fn radiance_lit(&self, origin: DVec3, d: DVec3) -> (Rgb, f64) {
+        let (mut l, t, _, met) = self.emitters.trace(
+            self.mesh,
+            self.field,
+            self.vis,
+            self.sky.as_ref(),
+            origin,
+            d,
+        );
+        let Some((leaf, normal)) = met else {
+            return (l, t);
+        };
+        let rho = self.field.reflectance(leaf);
+        if rho.iter().any(|&r| r > 0.0) {
+            // Just off the surface met, on the side the ray came from.
+            let p = origin + d * t + normal * 1e-5;
+            let mut direct = [0.0; 3];
+            for (light, local) in &self.hit_lights {
+                crate::lights::light_one(
+                    self.mesh.frame,
+                    light,
+                    *local,
+                    (p, normal),
+                    &mut direct,
+                    self.vis,
+                );
+            }
+            for c in 0..3 {
+                l[c] += rho[c] * direct[c] / std::f64::consts::PI;
+            }
+        }
         (l, t)
     }
 

@@ -52,8 +52,10 @@ pub(crate) fn shadow_points(mesh: &Mesh, leaf: usize) -> [glam::DVec3; crate::ex
     crate::exposure::points(&node.v, &mut rng)
 }
 
+/// Adds `light`'s direct irradiance at `x` (normal `n`; the mesh's `frame`, the light at
+/// `local` there) to `e` where a shadow ray reaches it.
 #[inline]
-fn light_one(
+pub(crate) fn light_one(
     frame: crate::mesh::Frame,
     light: &Light,
     local: glam::DVec3,

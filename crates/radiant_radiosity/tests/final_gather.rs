@@ -149,18 +149,27 @@ fn a_gather_is_the_same_on_one_and_two_threads() {
         strata: 3,
         ..GatherParams::default()
     };
-    let on = |threads: usize| {
+    let on = |threads: usize, params: GatherParams| {
         rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .expect("pool")
             .install(|| compose_gathered(&scene, &atlas, &r.mesh, &r.system, &r.radiosity, params))
     };
-    let (one, two) = (on(1), on(2));
+    let (one, two) = (on(1, params), on(2, params));
     assert!(one.texels.iter().flatten().all(|c| c.is_finite()));
     assert!(
         one.texels == two.texels,
         "the gather depends on the thread count"
+    );
+    // Finer lattices where the coarsest does not stand for a texel: the same bytes too.
+    let coarse = GatherParams {
+        stride: 8,
+        ..params
+    };
+    assert!(
+        on(1, coarse) == on(2, coarse),
+        "the lattices depend on the thread count"
     );
     // Another seed draws other rays: the seed is used.
     let other = compose_gathered(
@@ -205,12 +214,15 @@ fn a_box_standing_or_lifted_a_millimetre_lights_the_floor_the_same() {
         );
         scene
     };
-    let floor_light = |scene: &Scene, gathered: bool| -> Vec<(f64, f32)> {
+    // `stride`: the gather's coarsest lattice (8: finer lattices where the coarse one does
+    // not stand for a texel, as by the box); `None`: the smooth field.
+    let floor_light = |scene: &Scene, stride: Option<u32>| -> Vec<(f64, f32)> {
         let r = common::bake(scene, &BakeParams::default());
         let atlas = Atlas::new(scene, Some(64.0)).expect("atlas");
-        let map = if gathered {
+        let map = if let Some(stride) = stride {
             let params = GatherParams {
                 strata: 8,
+                stride,
                 ..GatherParams::default()
             };
             compose_gathered(scene, &atlas, &r.mesh, &r.system, &r.radiosity, params)
@@ -240,10 +252,11 @@ fn a_box_standing_or_lifted_a_millimetre_lights_the_floor_the_same() {
         }
         out
     };
-    for gathered in [false, true] {
+    for stride in [None, Some(2), Some(8)] {
+        let gathered = stride.is_some();
         let (standing, lifted) = (
-            floor_light(&room(0.0), gathered),
-            floor_light(&room(1e-3), gathered),
+            floor_light(&room(0.0), stride),
+            floor_light(&room(1e-3), stride),
         );
         assert_eq!(standing.len(), lifted.len());
         let mut worst = (0.0f64, 0.0f64);
@@ -276,7 +289,7 @@ fn a_box_standing_or_lifted_a_millimetre_lights_the_floor_the_same() {
         eprintln!("{bands:?}");
         eprintln!(
             "{}: worst {:.2} % at {:.3} m from the foot",
-            if gathered { "gathered" } else { "smooth field" },
+            stride.map_or("smooth field".into(), |s| format!("gathered, stride {s}")),
             worst.0 * 100.0,
             worst.1
         );
