@@ -55,17 +55,18 @@ pub struct GatherParams {
     /// Seed of the rays.
     pub seed: u64,
     /// The rays' part is averaged over the gathered texels of the same surface within this
-    /// many texels, and at least `stride` (a `(2r + 1)²` window, normals within 25°) whose rays' harmonic mean
-    /// distance is at least twice as far ([`VALID`]: Ward's irradiance caching): the noise
-    /// falls as if each texel had shot as many rays as it averages, and where geometry is near
-    /// (a contact) the average shrinks to the texels that see it alike.
+    /// many texels, at least `stride` (a `(2r + 1)²` window, normals within 25°), whose
+    /// rays' harmonic mean distance is at least twice as far ([`VALID`]: Ward's irradiance
+    /// caching): the noise falls as if each texel had shot as many rays as it averages, and
+    /// where geometry is near (a contact) the average shrinks to the texels that see it alike.
     pub filter_radius: u32,
     /// Rays are shot at every `stride`-th texel along each axis of the atlas (1: at every
-    /// texel), then on lattices twice as fine down to every second texel, at each texel
-    /// of a finer lattice that none gathered so far stands for (Ward's irradiance caching:
-    /// nearer than [`VALID`] of its rays' harmonic mean distance, on its surface and plane):
-    /// the open floor keeps the coarsest lattice, a contact or a chart of a few texels goes
-    /// down to the finest. The filter spreads them to the others.
+    /// texel), then on lattices twice as fine down to every second texel (after an odd
+    /// stride, every texel), at each texel of a finer lattice that none gathered so far stands
+    /// for (Ward's irradiance caching: nearer than [`VALID`] of its rays' harmonic mean
+    /// distance, on its surface and plane): the open floor keeps the coarsest lattice, a
+    /// contact or a chart of a few texels goes down to the finest. The filter spreads them to
+    /// the others.
     pub stride: u32,
     /// Gathers at the elements before the texels' ([`regather_elements`]): each pass gives
     /// every element the light its own points gather from the last pass's solution (0: the
