@@ -228,7 +228,7 @@ impl ProbeVolume {
             }
         }
         let total: f64 = blend.iter().map(|(_, w)| w).sum();
-        let mut sh = [[0.0; 9]; 3];
+        let mut sh = [[0.0; crate::harmonics::COUNT]; 3];
         let (nl, ne) = self.lighting.counts();
         let (mut lights, mut emitters) = (vec![0.0f64; nl], vec![0.0f64; ne]);
         for (p, w) in &blend {
