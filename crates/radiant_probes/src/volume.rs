@@ -16,7 +16,12 @@
 //! side: facing the box's open front, 13 % too dark; without it, 1.19 % mean and 3.8 % worst
 //! (16 divisions), so the visibility test alone guards against leaks here.
 //!
-//! Where no probe of the cell passes, the nearest valid probe is taken alone. The blend is of
+//! Where no probe of the cell passes, the nearest valid probe is taken alone. Where the 64
+//! probes around the cell all pass, the harmonics' part is blended tricubically instead
+//! (Catmull–Rom, limited to the range of the cell's corners; see `cubic`): light that grows
+//! convexly between probes, as facing the Cornell box's open front from near it, lies below
+//! the trilinear blend (the box's 20 points × 6 normals: worst 16.5 → 3.3 %). The renderer's
+//! GPU blend ([`ProbeVolume::h_harmonics`] on its grid) stays trilinear: 8 probes a fragment. The blend is of
 //! what each probe holds, re-evaluated at `x`: the harmonics are blended, and the lights' and
 //! emitters' light is computed at `x` itself for `n`, times their visibility at `x` when the
 //! scene's rays are given (shadow rays, as a renderer's shadow maps would give it: Sponza's
@@ -247,7 +252,70 @@ impl ProbeVolume {
         if let Some(v) = vis {
             (lights, emitters) = self.lighting.visibility_at(from, v);
         }
-        self.lighting.evaluate(x, n, &sh, &lights, &emitters)
+        let h = self.lighting.evaluate(x, n, &sh, &lights, &emitters);
+        // The harmonics' part again by the tricubic blend, where it can be had.
+        match self.cubic(g, base, from, n, vis) {
+            Some(cubic) => {
+                let linear = crate::sh_h(&sh, n);
+                std::array::from_fn(|c| (h[c] - linear[c] + cubic[c]).max(0.0))
+            }
+            None => h,
+        }
+    }
+
+    /// The harmonics' `H` at grid coordinates `g` (cell `base`) for normal `n` by a tricubic
+    /// (Catmull–Rom) blend of the 4 × 4 × 4 probes around the cell, limited to the range of
+    /// the cell's eight corners; `None` where any of them is inside geometry, hidden from
+    /// `from` (with `vis`) or off the grid (the cell on its border): the trilinear blend then.
+    ///
+    /// Why: the trilinear blend is exact for light that varies linearly between probes, and
+    /// lies above it where it varies convexly, as in the Cornell box facing its open front from
+    /// near it (irradiance about the square of the depth: +16 % there at 3.5 cm spacing). A
+    /// Catmull–Rom blend is exact to the second order; the limit keeps its negative weights
+    /// from overshooting at sharp changes.
+    fn cubic(
+        &self,
+        g: DVec3,
+        base: [i64; 3],
+        from: DVec3,
+        n: DVec3,
+        vis: Option<&dyn Visibility>,
+    ) -> Option<Rgb> {
+        if (0..3).any(|k| base[k] < 1 || base[k] + 2 >= self.dims[k] as i64) {
+            return None;
+        }
+        let weights: [[f64; 4]; 3] = std::array::from_fn(|k| catmull_rom(g[k] - base[k] as f64));
+        let mut sh = [[0.0; crate::harmonics::COUNT]; 3];
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for l in 0..4 {
+            for j in 0..4 {
+                for i in 0..4 {
+                    let c = [base[0] + i - 1, base[1] + j - 1, base[2] + l - 1];
+                    let probe = &self.probes[self.index(c)];
+                    if probe.inside()
+                        || vis.is_some_and(|v| {
+                            !v.segment_clear(from.as_vec3(), probe.position.as_vec3())
+                        })
+                    {
+                        return None;
+                    }
+                    let w =
+                        weights[0][i as usize] * weights[1][j as usize] * weights[2][l as usize];
+                    for (a, b) in sh.iter_mut().flatten().zip(probe.sh.iter().flatten()) {
+                        *a += w * b;
+                    }
+                    if (1..=2).contains(&i) && (1..=2).contains(&j) && (1..=2).contains(&l) {
+                        let own = crate::sh_h(&probe.sh, n);
+                        for c in 0..3 {
+                            lo[c] = lo[c].min(own[c]);
+                            hi[c] = hi[c].max(own[c]);
+                        }
+                    }
+                }
+            }
+        }
+        let h = crate::sh_h(&sh, n);
+        Some(std::array::from_fn(|c| h[c].clamp(lo[c], hi[c])))
     }
 
     /// The irradiance `E = π H` at `p` in scene (world) units for unit normal `n` (`vis` as
@@ -260,5 +328,34 @@ impl ProbeVolume {
     fn index(&self, c: [i64; 3]) -> usize {
         let [i, j, l] = c.map(|v| v.max(0) as usize);
         (l * self.dims[1] + j) * self.dims[0] + i
+    }
+}
+
+/// Catmull–Rom weights of the four samples at −1, 0, 1, 2 for a point at `t` in [0, 1]
+/// between the middle two (they sum to 1 and reproduce quadratics).
+fn catmull_rom(t: f64) -> [f64; 4] {
+    let t = t.clamp(0.0, 1.0);
+    let (t2, t3) = (t * t, t * t * t);
+    [
+        0.5 * (-t3 + 2.0 * t2 - t),
+        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+        0.5 * (t3 - t2),
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn catmull_rom_reproduces_quadratics() {
+        for t in [0.0, 0.13, 0.5, 0.77, 1.0] {
+            let w = catmull_rom(t);
+            let f = |x: f64| 0.3 + 1.7 * x - 2.1 * x * x;
+            let blend: f64 = (0..4).map(|k| w[k] * f(k as f64 - 1.0)).sum();
+            assert!((blend - f(t)).abs() < 1e-12, "{t}: {blend} vs {}", f(t));
+            assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        }
     }
 }
