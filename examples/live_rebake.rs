@@ -7,7 +7,9 @@
 //! `cargo run --release --example live_rebake SCENE.gltf [PREFIX [DX [REFINEMENT]]]`: the
 //! surfaces whose names start with PREFIX moved by DX scene units along x (for Sponza,
 //! `../shared/scenes/sponza/Sponza_sun.gltf VaseRound.003 0.2`: a vase moved 20 cm; for the
-//! box baked clustered, `assets/cornell_box.gltf short_block 0.05 0.008`).
+//! box baked clustered, `assets/cornell_box.gltf short_block 0.05 0.008`). With `--probes`
+//! anywhere, the level's world also keeps an irradiance volume (`ProbeVolumeBake`), and the
+//! times after the move at which the probes carry the new light are printed.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -19,16 +21,66 @@ use radiant::radiosity::{BakeParams, Rgb};
 /// geometry edit's preview).
 type Snapshots = Vec<(f64, Arc<Vec<Rgb>>, bool)>;
 
+/// Published probe volumes: (seconds since the change, the light's generation, whether it is
+/// the light's preview volume, seconds its sampling took).
+type Volumes = Vec<(f64, u64, bool, f64)>;
+
+/// With probes in the world: steps frames until the volume of the current light is the full
+/// one, recording each volume published since `t0` into `volumes`.
+fn settle_probes(app: &mut App, t0: Instant, volumes: &mut Volumes) {
+    if app.world.get_resource::<ProbeVolumeBake>().is_none() {
+        return;
+    }
+    let mut seen = app.world.resource::<BakedProbes>().published;
+    loop {
+        let p = app.world.resource::<BakedProbes>();
+        if p.published != seen {
+            seen = p.published;
+            volumes.push((
+                t0.elapsed().as_secs_f64(),
+                p.generation,
+                p.preview,
+                p.seconds,
+            ));
+        }
+        if p.generation == app.world.resource::<BakedLighting>().generation
+            && !p.in_flight
+            && !p.preview
+        {
+            return;
+        }
+        app.update();
+        std::thread::sleep(Duration::from_millis(1));
+    }
+}
+
 /// Steps frames until converged; returns the published snapshots and the duration of every
 /// frame in milliseconds.
 fn run(app: &mut App, t0: Instant) -> (Snapshots, Vec<f64>) {
+    run_with(app, t0, &mut Vec::new())
+}
+
+/// [`run`], recording the probe volumes published meanwhile (when the world has probes).
+fn run_with(app: &mut App, t0: Instant, volumes: &mut Volumes) -> (Snapshots, Vec<f64>) {
     let mut snaps = Vec::new();
     let mut frames = Vec::new();
     let mut seen = app.world.resource::<BakedLighting>().generation;
+    let mut published = app.world.get_resource::<BakedProbes>().map(|p| p.published);
     loop {
         let f = Instant::now();
         app.update();
         frames.push(f.elapsed().as_secs_f64() * 1e3);
+        if let Some(p) = app.world.get_resource::<BakedProbes>()
+            && Some(p.published) != published
+        {
+            published = Some(p.published);
+            volumes.push((
+                t0.elapsed().as_secs_f64(),
+                p.generation,
+                p.preview,
+                p.seconds,
+            ));
+        }
         let lit = app.world.resource::<BakedLighting>();
         if lit.generation != seen && !app.world.resource::<BakeStatus>().stale {
             seen = lit.generation;
@@ -78,7 +130,10 @@ fn report(what: &str, snaps: &Snapshots, frames: &mut [f64]) {
 }
 
 fn main() -> anyhow::Result<()> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    let args: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| a != "--probes")
+        .collect();
     match args.first() {
         Some(path) if path.ends_with(".gltf") || path.ends_with(".glb") => level(path, &args[1..]),
         size => cornell(size),
@@ -101,6 +156,10 @@ fn level(path: &str, args: &[String]) -> anyhow::Result<()> {
             hierarchy: radiant::radiosity::cluster::Hierarchy::Clustered,
             ..RadiosityBake::default()
         });
+    let probes = std::env::args().any(|a| a == "--probes");
+    if probes {
+        app.insert_resource(ProbeVolumeBake::default());
+    }
     spawn_scene(&mut app.world, &scene);
     let t0 = Instant::now();
     let (snaps, mut frames) = run(&mut app, t0);
@@ -113,6 +172,9 @@ fn level(path: &str, args: &[String]) -> anyhow::Result<()> {
         s.progress.iterations
     );
     report("first bake", &snaps, &mut frames);
+    // The probes of the converged light first, so that the move's are told apart.
+    settle_probes(&mut app, Instant::now(), &mut Vec::new());
+    let before = app.world.resource::<BakedLighting>().generation;
 
     let mut q = app.world.query::<(&Name, &mut Transform)>();
     let mut moved = 0;
@@ -124,13 +186,27 @@ fn level(path: &str, args: &[String]) -> anyhow::Result<()> {
     }
     anyhow::ensure!(moved > 0, "no surface of {path} is named {prefix}...");
     let t0 = Instant::now();
-    let (snaps, mut frames) = run(&mut app, t0);
+    let mut volumes = Vec::new();
+    let (snaps, mut frames) = run_with(&mut app, t0, &mut volumes);
+    settle_probes(&mut app, t0, &mut volumes);
     let s = app.world.resource::<BakeStatus>();
     println!(
         "\n{moved} surfaces named {prefix}... moved {dx} along x: {} form factors computed, {} links, {} builds in all",
         s.counts.links_recomputed, s.size.links, s.counts.builds
     );
     report("move", &snaps, &mut frames);
+    if probes {
+        println!(
+            "probe volumes of the lights published after the move (the light before it: {before}):"
+        );
+        for (t, generation, preview, seconds) in volumes.iter().filter(|v| v.1 > before) {
+            let what = if *preview { "preview" } else { "full" };
+            println!(
+                "  {:9.1} ms  light {generation}, {what}, sampled in {seconds:.3} s",
+                t * 1e3
+            );
+        }
+    }
     Ok(())
 }
 

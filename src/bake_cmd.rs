@@ -171,6 +171,18 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
         Some(m) => spectral(args, &job, &mut result, m, solved)?,
         None => serde_json::Value::Null,
     };
+    // Before the light map, so that its rays and field are gone while the map's are made: the
+    // probes then add nothing to the bake's peak memory (Sponza: +56 to +101 MB after it).
+    let probes = match &job.probes {
+        Some(p) => Some(crate::probes::write(
+            p,
+            &job.scene,
+            &result,
+            args.probe_spacing,
+            &args.out,
+        )?),
+        None => None,
+    };
     let written = write_outputs(args, &job, &result)?;
     // Only where it is measured: on Sponza it takes 7 s.
     let shown = match job.reference {
@@ -183,16 +195,6 @@ pub fn run(args: &BakeArgs) -> anyhow::Result<()> {
             &job.scene,
             &job.atlas,
             &written.map,
-            &args.out,
-        )?),
-        None => None,
-    };
-    let probes = match &job.probes {
-        Some(p) => Some(crate::probes::write(
-            p,
-            &job.scene,
-            &result,
-            args.probe_spacing,
             &args.out,
         )?),
         None => None,

@@ -1,14 +1,17 @@
 //! Irradiance probes for what moves, kept up to date with the background bake.
 //!
 //! Insert [`ProbeVolumeBake`] (with [`crate::bake::RadiosityBake`]) and every light the bake
-//! publishes for the current scene (not a geometry edit's preview, not a stale one) is sampled
+//! publishes for the current scene (a geometry edit's first look at its light included, not a
+//! stale one) is sampled
 //! into an irradiance volume ([`radiant_probes::ProbeVolume`]) by a task on bevy's
 //! `AsyncComputeTaskPool`; [`BakedProbes`] holds the latest. The frame never waits: a volume
 //! in flight is picked up by a later frame, and a light published meanwhile is sampled next.
 //! Each new light gets a preview volume first (a sixteenth of the rays, within the light map's
 //! edit budget on the Cornell box:
 //! [`ProbeVolumeBake::preview_strata`]), so moved geometry relights the probes soon, then the
-//! full volume for the same light replaces it ([`BakedProbes::preview`] tells which is shown).
+//! full volume for the same light replaces it ([`BakedProbes::preview`] tells which is shown;
+//! an edit's first look gets the preview alone: its solved light follows). The rays (a BVH
+//! over the mesh) are built in the task and kept for the next light of the same mesh.
 //! Without [`ProbeVolumeBake`] nothing is sampled and nothing allocated: a scene with nothing
 //! that moves does not pay for probes.
 
@@ -78,12 +81,26 @@ pub struct BakedProbes {
 /// Per probe, [`ProbeVolume::h_harmonics`]: nine RGB coefficients and whether it is valid.
 pub type Harmonics = Vec<([[f64; 3]; 9], bool)>;
 
-/// What the sampling task returns: the volume, its harmonics and the seconds they took.
-type Sampled = (ProbeVolume, Harmonics, f64);
+/// Rays over a mesh: the mesh (weakly: it is told apart by its address, which a `Weak` keeps
+/// from being reused, and it is freed when the bake drops it) and its BVH.
+type Rays = (
+    std::sync::Weak<radiant_radiosity::mesh::Mesh>,
+    Arc<radiant_visibility::Bvh>,
+);
+
+/// What the sampling task returns: the volume, its harmonics, the seconds they took and the
+/// rays it sampled with.
+type Sampled = (ProbeVolume, Harmonics, f64, Rays);
 
 /// The task sampling a volume, the light generation it samples and whether it is a preview.
 #[derive(Resource, Default)]
 struct ProbeTask(Option<(u64, bool, Task<Sampled>)>);
+
+/// The rays of the last mesh sampled (its BVH, alpha masks included), kept for the next light
+/// of the same mesh: on Sponza (262 k triangles) the BVH takes ~1 s to build, the preview's
+/// rays ~0.1 s.
+#[derive(Resource, Default)]
+struct ProbeRays(Option<Rays>);
 
 /// System set of [`drive_probes`], after the bake's.
 #[derive(SystemSet, Clone, Debug, PartialEq, Eq, Hash)]
@@ -97,6 +114,7 @@ impl Plugin for ProbePlugin {
     fn build(&self, app: &mut App) {
         app.init_resource::<BakedProbes>()
             .init_resource::<ProbeTask>()
+            .init_resource::<ProbeRays>()
             .configure_sets(PostUpdate, ProbeSystems.after(BakeSystems))
             .add_systems(PostUpdate, drive_probes.in_set(ProbeSystems));
     }
@@ -109,7 +127,8 @@ pub fn drive_probes(world: &mut World) {
         Some((_, _, task)) => check_ready(task),
         None => None,
     };
-    if let Some((volume, harmonics, seconds)) = done {
+    if let Some((volume, harmonics, seconds, rays)) = done {
+        world.resource_mut::<ProbeRays>().0 = Some(rays);
         let (generation, preview) = world
             .resource_mut::<ProbeTask>()
             .0
@@ -136,20 +155,23 @@ pub fn drive_probes(world: &mut World) {
     let (Some(mesh), Some(field)) = (lighting.mesh.clone(), lighting.field.clone()) else {
         return;
     };
-    if preview || world.resource::<BakeStatus>().stale {
+    if world.resource::<BakeStatus>().stale {
         return;
     }
     let published = world.resource::<BakedProbes>();
-    // A new light: its preview first (when asked); the light of a preview: the full volume.
+    // A new light: its preview first (when asked); a geometry edit's first look at its light
+    // (`BakedLighting::preview`) too, so the probes relight as soon as the light maps do;
+    // the light of a preview volume, when it is not an edit's preview: the full volume.
+    let preview_probe = match settings.preview_strata {
+        Some(strata) if strata < settings.probe.strata => ProbeParams {
+            strata: strata.max(1),
+            ..settings.probe
+        },
+        _ => settings.probe,
+    };
     let probe = if generation > published.generation {
-        match settings.preview_strata {
-            Some(strata) if strata < settings.probe.strata => ProbeParams {
-                strata: strata.max(1),
-                ..settings.probe
-            },
-            _ => settings.probe,
-        }
-    } else if generation == published.generation && published.preview {
+        preview_probe
+    } else if generation == published.generation && published.preview && !preview {
         settings.probe
     } else {
         return;
@@ -158,14 +180,24 @@ pub fn drive_probes(world: &mut World) {
     // The light matches the world's scene now (not stale): the scene its mesh was made from.
     let scene = gather_scene(world);
     let volume_params = settings.volume;
+    // The last mesh's rays, when this light's mesh is that one; else they are dropped now.
+    let kept = match world.resource_mut::<ProbeRays>().0.take() {
+        Some((m, bvh)) if std::ptr::eq(m.as_ptr(), Arc::as_ptr(&mesh)) => Some(bvh),
+        _ => None,
+    };
     let task = AsyncComputeTaskPool::get().spawn(async move {
         let t0 = Instant::now();
-        let masks = radiant_radiosity::input::masks(&scene);
-        let vis = radiant_radiosity::input::visibility(&mesh, masks.as_ref());
-        let baker = ProbeBaker::new(&scene, &mesh, &field, &vis, probe);
+        // Built in the task (never on the frame), once per mesh.
+        let vis = kept.unwrap_or_else(|| {
+            let masks = radiant_radiosity::input::masks(&scene);
+            Arc::new(radiant_radiosity::input::visibility(&mesh, masks.as_ref()))
+        });
+        let baker = ProbeBaker::new(&scene, &mesh, &field, &*vis, probe);
         let volume = ProbeVolume::bake(&baker, &volume_params);
         let harmonics = volume.h_harmonics();
-        (volume, harmonics, t0.elapsed().as_secs_f64())
+        drop(baker);
+        let rays = (Arc::downgrade(&mesh), vis);
+        (volume, harmonics, t0.elapsed().as_secs_f64(), rays)
     });
     world.resource_mut::<ProbeTask>().0 = Some((generation, is_preview, task));
     world.resource_mut::<BakedProbes>().in_flight = true;
