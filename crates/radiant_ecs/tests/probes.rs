@@ -245,3 +245,47 @@ fn an_edits_first_look_at_its_light_relights_the_probes() {
     settle(&mut app);
     assert!(!app.world.resource::<BakedLighting>().preview);
 }
+
+/// The probes keep the scene they gathered for a light while the bake's lights keep coming
+/// for the same scene, and gather it again when it changes: a panel made brighter while the
+/// first bake is still solving (a volume already sampled from the old scene) ends in the
+/// volume a direct bake of the brighter scene gives.
+#[test]
+fn an_emitter_changed_mid_bake_relights_the_probes_with_the_new_scene() {
+    let mut app = cornell_app(true);
+    let t = std::time::Instant::now();
+    let ok = app.run_until(u64::MAX, Duration::from_millis(1), |w| {
+        w.resource::<BakedProbes>().published > 0 || t.elapsed() > Duration::from_secs(60)
+    });
+    assert!(
+        ok && app.world.resource::<BakedProbes>().published > 0,
+        "no volume"
+    );
+    let mut q = app.world.query::<&mut Material>();
+    let mut lamps = 0;
+    for mut m in q.iter_mut(&mut app.world) {
+        if m.emission.iter().any(|&e| e > 0.0) {
+            m.emission = m.emission.map(|e| 2.0 * e);
+            lamps += 1;
+        }
+    }
+    assert!(lamps > 0, "no emitter");
+    app.update();
+    settle(&mut app);
+    let got = app
+        .world
+        .resource::<BakedProbes>()
+        .volume
+        .clone()
+        .expect("volume");
+    let want = direct_volume(&mut app);
+    for p in BESIDE {
+        for n in [DVec3::Y, DVec3::NEG_Y, DVec3::X] {
+            let (g, w) = (
+                got.irradiance_world(p, n, None),
+                want.irradiance_world(p, n, None),
+            );
+            assert!(close(g, w, 1e-3), "{p} {n}: {g:?} vs {w:?}");
+        }
+    }
+}

@@ -372,6 +372,11 @@ enum Pending {
 }
 
 impl BakeWorker {
+    /// Increments on every scene change the bake absorbs: a light published at this epoch
+    /// matches the world's scene as it is.
+    pub fn epoch(&self) -> u64 {
+        self.epoch
+    }
     /// Whether a worker task exists (building or solving).
     pub fn is_running(&self) -> bool {
         matches!(self.state, WorkerState::Running(_))
