@@ -146,15 +146,31 @@ pub(crate) fn mark_dynamic(scene: &mut Scene, nodes: &[String]) -> anyhow::Resul
     Ok(marked)
 }
 
-/// Bakes the volume over `result` (with `spacing`, scene units, or the default), writes
-/// probes.csv in `out`, and returns report.json's `probes` and the summary line.
-pub(crate) fn write(
+/// What `--probes` measured, before `probes.csv` is written.
+pub(crate) struct Measured {
+    /// `probes.csv`.
+    csv: String,
+    /// The report's `probes`.
+    pub(crate) json: Value,
+    /// The summary's line.
+    pub(crate) summary: String,
+}
+
+impl Measured {
+    /// Writes `probes.csv` in `out`.
+    pub(crate) fn write(&self, out: &Path) -> anyhow::Result<()> {
+        write_atomic(&out.join("probes.csv"), self.csv.as_bytes())
+    }
+}
+
+/// Bakes the volume over `result` (with `spacing`, scene units, or the default) and reads it at
+/// the asked points: `probes.csv`, report.json's `probes` and the summary line.
+pub(crate) fn measure(
     asked: &AskedProbes,
     scene: &Scene,
     result: &BakeResult,
     spacing: Option<f64>,
-    out: &Path,
-) -> anyhow::Result<(Value, String)> {
+) -> Measured {
     let t0 = Instant::now();
     let (solved, volume) = bake_volume(scene, result, spacing);
     let bake_s = t0.elapsed().as_secs_f64();
@@ -174,7 +190,6 @@ pub(crate) fn write(
             e[2]
         );
     }
-    write_atomic(&out.join("probes.csv"), csv.as_bytes())?;
     let spacing = volume.step * result.mesh.frame.scale;
     let mut json = json!({
         "count": asked.probes.len(),
@@ -230,5 +245,5 @@ pub(crate) fn write(
             100.0 * worst
         );
     }
-    Ok((json, summary))
+    Measured { csv, json, summary }
 }
