@@ -16,10 +16,16 @@ fn params() -> BakeParams {
 }
 
 fn cornell_app(probes: bool) -> App {
+    cornell_app_with(probes, RadiosityBake::default().hierarchy)
+}
+
+/// [`cornell_app`] baked with `hierarchy`.
+fn cornell_app_with(probes: bool, hierarchy: radiant_radiosity::cluster::Hierarchy) -> App {
     let mut app = App::new();
     app.add_plugins(RadiantPlugins)
         .insert_resource(RadiosityBake {
             params: params(),
+            hierarchy,
             ..RadiosityBake::default()
         });
     if probes {
@@ -208,16 +214,7 @@ fn a_preview_volume_comes_first_and_the_full_one_replaces_it() {
 /// solved light: on Sponza 10 s after the move instead of 0.6 s).
 #[test]
 fn an_edits_first_look_at_its_light_relights_the_probes() {
-    let mut app = App::new();
-    app.add_plugins(RadiantPlugins)
-        .insert_resource(RadiosityBake {
-            params: params(),
-            hierarchy: radiant_radiosity::cluster::Hierarchy::Clustered,
-            ..RadiosityBake::default()
-        })
-        .insert_resource(ProbeVolumeBake::default());
-    let scene = radiant_scene::builtin("cornell-box").expect("builtin");
-    spawn_scene(&mut app.world, &scene);
+    let mut app = cornell_app_with(true, radiant_radiosity::cluster::Hierarchy::Clustered);
     settle(&mut app);
     let mut q = app.world.query::<(&Name, &mut Transform)>();
     for (n, mut t) in q.iter_mut(&mut app.world) {

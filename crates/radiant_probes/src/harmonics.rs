@@ -104,13 +104,7 @@ mod tests {
 
     /// Points of a spherical Fibonacci lattice, each of solid angle `4π / n`.
     fn sphere(n: usize) -> impl Iterator<Item = DVec3> {
-        let golden = PI * (3.0 - 5f64.sqrt());
-        (0..n).map(move |i| {
-            let z = 1.0 - (2.0 * i as f64 + 1.0) / n as f64;
-            let r = (1.0 - z * z).max(0.0).sqrt();
-            let phi = golden * i as f64;
-            DVec3::new(r * phi.cos(), r * phi.sin(), z)
-        })
+        (0..n).map(move |i| crate::volume::fibonacci(i, n))
     }
 
     #[test]

@@ -39,7 +39,7 @@ use radiant_radiosity::cluster::sh;
 use crate::{Lighting, Probe, ProbeBaker};
 
 /// The `i`-th of `n` points of a spherical Fibonacci lattice (equal areas, unit vectors).
-fn fibonacci(i: usize, n: usize) -> DVec3 {
+pub(crate) fn fibonacci(i: usize, n: usize) -> DVec3 {
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
     let z = 1.0 - (2.0 * i as f64 + 1.0) / n as f64;
     let r = (1.0 - z * z).max(0.0).sqrt();
@@ -192,8 +192,12 @@ impl ProbeVolume {
 
     /// `H` a surface at `x` (the mesh's frame) with unit normal `n` receives from the volume;
     /// with `vis` (the scene's rays in the same frame), the probes hidden from `x` are left
-    /// out (no leak through walls), without it only those inside geometry.
+    /// out (no leak through walls), without it only those inside geometry. A point or normal
+    /// that is not finite receives nothing (0, not NaN).
     pub fn h(&self, x: DVec3, n: DVec3, vis: Option<&dyn Visibility>) -> Rgb {
+        if !x.is_finite() || !n.is_finite() {
+            return [0.0; 3];
+        }
         let g = (x - self.origin) / self.step;
         let base: [i64; 3] = std::array::from_fn(|k| {
             (g[k].floor() as i64).clamp(0, self.dims[k].saturating_sub(2) as i64)

@@ -325,6 +325,10 @@ fn the_volume_follows_light_that_grows_convexly_between_its_probes() {
     }
     let mean = sum / count;
     assert!(mean < 0.05 && worst < 0.09, "mean {mean}, worst {worst}");
+    // A point or normal that is not finite reads nothing, not NaN.
+    for (p, n) in [(DVec3::NAN, DVec3::Y), (DVec3::splat(0.2), DVec3::INFINITY)] {
+        assert_eq!(volume.irradiance_world(p, n, Some(&solved.vis)), [0.0; 3]);
+    }
 }
 
 /// A 10 cm wall across the floor, a point light on one side only: the probes on the dark side,
