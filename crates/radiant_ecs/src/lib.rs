@@ -44,7 +44,7 @@ pub mod prelude {
     pub use crate::app::{App, FrameCount, Plugin, PostUpdate, PreUpdate, Startup, Update};
     pub use crate::bake::{
         BakeControl, BakePhase, BakePlugin, BakeStatus, BakeSystems, BakeWorker, BakedLighting,
-        RadiosityBake,
+        RadiosityBake, SceneSnapshot,
     };
     pub use crate::probes::{BakedProbes, ProbePlugin, ProbeSystems, ProbeVolumeBake};
     #[cfg(feature = "render")]

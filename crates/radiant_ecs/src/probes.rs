@@ -11,7 +11,9 @@
 //! [`ProbeVolumeBake::preview_strata`]), so moved geometry relights the probes soon, then the
 //! full volume for the same light replaces it ([`BakedProbes::preview`] tells which is shown;
 //! an edit's first look gets the preview alone: its solved light follows). The rays (a BVH
-//! over the mesh) are built in the task and kept for the next light of the same mesh.
+//! over the scene's triangles) are built in a task of their own as soon as the bake takes in
+//! a geometry change, from the scene it gathered ([`SceneSnapshot`]), so they are ready, or
+//! nearly, when the edit's first light comes; they are kept while the geometry stays.
 //! Without [`ProbeVolumeBake`] nothing is sampled and nothing allocated: a scene with nothing
 //! that moves does not pay for probes.
 
@@ -23,7 +25,7 @@ use bevy_tasks::{AsyncComputeTaskPool, Task, futures::check_ready};
 use radiant_probes::{ProbeBaker, ProbeParams, ProbeVolume, VolumeParams};
 
 use crate::app::{App, Plugin, PostUpdate};
-use crate::bake::{BakePhase, BakeStatus, BakeSystems, BakeWorker, BakedLighting};
+use crate::bake::{BakePhase, BakeStatus, BakeSystems, BakeWorker, BakedLighting, SceneSnapshot};
 use crate::scene::gather_scene;
 
 /// Probes for the world's dynamic meshes. Present → a volume follows the bake's light; absent
@@ -76,38 +78,34 @@ pub struct BakedProbes {
     pub preview: bool,
     /// Volumes published so far.
     pub published: u64,
+    /// Rays (a BVH over the scene's triangles) built so far: one for each change of static
+    /// geometry the bake takes in, none for a material or light edit.
+    pub rays_built: u64,
 }
 
 /// Per probe, [`ProbeVolume::h_harmonics`]: nine RGB coefficients and whether it is valid.
 pub type Harmonics = Vec<([[f64; 3]; 9], bool)>;
 
-/// Rays over a mesh: the mesh (weakly: it is told apart by its address, which a `Weak` keeps
-/// from being reused, and it is freed when the bake drops it) and its BVH.
-type Rays = (
-    std::sync::Weak<radiant_radiosity::mesh::Mesh>,
-    Arc<radiant_visibility::Bvh>,
-);
+/// The [`SceneSnapshot::geometry_epoch`] rays were built for, and the rays over the scene's
+/// triangles (its BVH, alpha masks included; `None`: the scene had none to build, as the
+/// bake says too).
+type Rays = (u64, Option<Arc<radiant_visibility::Bvh>>);
 
-/// What the sampling task returns: the volume, its harmonics, the seconds they took and the
-/// rays it sampled with.
-type Sampled = (ProbeVolume, Harmonics, f64, Rays);
+/// What the sampling task returns: the volume, its harmonics and the seconds they took.
+type Sampled = (ProbeVolume, Harmonics, f64);
 
 /// The task sampling a volume, the light generation it samples and whether it is a preview.
 #[derive(Resource, Default)]
 struct ProbeTask(Option<(u64, bool, Task<Sampled>)>);
 
-/// The rays of the last mesh sampled (its BVH, alpha masks included), kept for the next light
-/// of the same mesh: on Sponza (262 k triangles) the BVH takes ~1 s to build, the preview's
-/// rays ~0.1 s.
+/// The rays of the scene's geometry, kept while it stays (on Sponza, 262 k triangles, the BVH
+/// takes ~1 s to build, the preview's rays ~0.1 s), and the task building them for a newer
+/// geometry.
 #[derive(Resource, Default)]
-struct ProbeRays(Option<Rays>);
-
-/// The world's scene as the probes last gathered it, and the bake's epoch it matches: a
-/// solve publishes a light every few sweeps, and each would gather the scene again on the
-/// frame (Sponza: its longest frames 180–200 ms with probes against 120–156 ms without).
-/// Dropped once the probes have the full volume of a converged light.
-#[derive(Resource, Default)]
-struct ProbeScene(Option<(u64, Arc<radiant_scene::Scene>)>);
+struct ProbeRays {
+    rays: Option<Rays>,
+    building: Option<(u64, Task<Option<radiant_visibility::Bvh>>)>,
+}
 
 /// System set of [`drive_probes`], after the bake's.
 #[derive(SystemSet, Clone, Debug, PartialEq, Eq, Hash)]
@@ -122,21 +120,20 @@ impl Plugin for ProbePlugin {
         app.init_resource::<BakedProbes>()
             .init_resource::<ProbeTask>()
             .init_resource::<ProbeRays>()
-            .init_resource::<ProbeScene>()
+            .init_resource::<SceneSnapshot>()
             .configure_sets(PostUpdate, ProbeSystems.after(BakeSystems))
             .add_systems(PostUpdate, drive_probes.in_set(ProbeSystems));
     }
 }
 
-/// Publishes a finished volume, and starts sampling the bake's newest light when none is in
-/// flight (see the module).
+/// Publishes a finished volume, builds the rays of a new geometry as soon as the bake takes it
+/// in, and starts sampling the bake's newest light when none is in flight (see the module).
 pub fn drive_probes(world: &mut World) {
     let done = match &mut world.resource_mut::<ProbeTask>().0 {
         Some((_, _, task)) => check_ready(task),
         None => None,
     };
-    if let Some((volume, harmonics, seconds, rays)) = done {
-        world.resource_mut::<ProbeRays>().0 = Some(rays);
+    if let Some((volume, harmonics, seconds)) = done {
         let (generation, preview) = world
             .resource_mut::<ProbeTask>()
             .0
@@ -154,15 +151,29 @@ pub fn drive_probes(world: &mut World) {
             && generation == world.resource::<BakedLighting>().generation
             && world.resource::<BakeStatus>().phase == BakePhase::Converged;
         if settled {
-            world.resource_mut::<ProbeScene>().0 = None;
+            world.resource_mut::<SceneSnapshot>().scene = None;
         }
+    }
+    let built = match &mut world.resource_mut::<ProbeRays>().building {
+        Some((_, task)) => check_ready(task),
+        None => None,
+    };
+    if let Some(bvh) = built {
+        let mut r = world.resource_mut::<ProbeRays>();
+        let geometry = r.building.take().map_or(0, |(g, _)| g);
+        r.rays = Some((geometry, bvh.map(Arc::new)));
+        world.resource_mut::<BakedProbes>().rays_built += 1;
     }
     let running = world.resource::<ProbeTask>().0.is_some();
     world.resource_mut::<BakedProbes>().in_flight = running;
     let Some(settings) = world.get_resource::<ProbeVolumeBake>().copied() else {
+        // No probes: nothing of theirs is held.
+        world.resource_mut::<SceneSnapshot>().scene = None;
+        *world.resource_mut::<ProbeRays>() = ProbeRays::default();
         return;
     };
-    if running {
+    let geometry = world.resource::<SceneSnapshot>().geometry_epoch;
+    if !rays_ready(world, geometry) || running {
         return;
     }
     let lighting = world.resource::<BakedLighting>();
@@ -192,37 +203,65 @@ pub fn drive_probes(world: &mut World) {
         return;
     };
     let is_preview = probe.strata < settings.probe.strata;
-    // The light matches the world's scene now (not stale): the scene its mesh was made from,
-    // gathered once per epoch.
-    let epoch = world.resource::<BakeWorker>().epoch();
-    let scene = match &world.resource::<ProbeScene>().0 {
-        Some((e, scene)) if *e == epoch => scene.clone(),
-        _ => {
-            let scene = Arc::new(gather_scene(world));
-            world.resource_mut::<ProbeScene>().0 = Some((epoch, scene.clone()));
-            scene
-        }
+    // The light matches the world's scene now (not stale): the scene the bake gathered for
+    // this epoch, or gathered again when it was dropped.
+    let Some((_, Some(vis))) = world.resource::<ProbeRays>().rays.clone() else {
+        return;
     };
+    let scene = current_scene(world);
     let volume_params = settings.volume;
-    // The last mesh's rays, when this light's mesh is that one; else they are dropped now.
-    let kept = match world.resource_mut::<ProbeRays>().0.take() {
-        Some((m, bvh)) if std::ptr::eq(m.as_ptr(), Arc::as_ptr(&mesh)) => Some(bvh),
-        _ => None,
-    };
     let task = AsyncComputeTaskPool::get().spawn(async move {
         let t0 = Instant::now();
-        // Built in the task (never on the frame), once per mesh.
-        let vis = kept.unwrap_or_else(|| {
-            let masks = radiant_radiosity::input::masks(&scene);
-            Arc::new(radiant_radiosity::input::visibility(&mesh, masks.as_ref()))
-        });
         let baker = ProbeBaker::new(&scene, &mesh, &field, &*vis, probe);
         let volume = ProbeVolume::bake(&baker, &volume_params);
         let harmonics = volume.h_harmonics();
-        drop(baker);
-        let rays = (Arc::downgrade(&mesh), vis);
-        (volume, harmonics, t0.elapsed().as_secs_f64(), rays)
+        (volume, harmonics, t0.elapsed().as_secs_f64())
     });
     world.resource_mut::<ProbeTask>().0 = Some((generation, is_preview, task));
     world.resource_mut::<BakedProbes>().in_flight = true;
+}
+
+/// The world's scene at the bake's epoch: the bake's snapshot, or gathered (once) when it was
+/// dropped.
+fn current_scene(world: &mut World) -> Arc<radiant_scene::Scene> {
+    let epoch = world.resource::<BakeWorker>().epoch();
+    let snapshot = world.resource::<SceneSnapshot>();
+    match &snapshot.scene {
+        Some(scene) if snapshot.epoch == epoch => scene.clone(),
+        _ => {
+            let scene = Arc::new(gather_scene(world));
+            let mut snapshot = world.resource_mut::<SceneSnapshot>();
+            snapshot.epoch = epoch;
+            snapshot.scene = Some(scene.clone());
+            scene
+        }
+    }
+}
+
+/// Whether the rays of `geometry` (a [`SceneSnapshot::geometry_epoch`]) are built; if not,
+/// starts building them in a task (one at a time), from the scene the bake took in, before
+/// its light comes: on Sponza the light of a moved vase is previewed ~0.7 s after the move,
+/// and the rays take about as long.
+fn rays_ready(world: &mut World, geometry: u64) -> bool {
+    let r = world.resource::<ProbeRays>();
+    if r.rays.as_ref().is_some_and(|(g, _)| *g == geometry) {
+        return true;
+    }
+    // Nothing taken in yet, or a build under way (of this geometry, or of an older one whose
+    // end starts this one's).
+    if geometry == 0 || r.building.is_some() {
+        return false;
+    }
+    let scene = current_scene(world);
+    let mut r = world.resource_mut::<ProbeRays>();
+    // The old rays go first: no two BVHs of a level at once.
+    r.rays = None;
+    let task = AsyncComputeTaskPool::get().spawn(async move {
+        let masks = radiant_radiosity::input::masks(&scene);
+        radiant_radiosity::input::scene_visibility(&scene, masks.as_ref())
+            .inspect_err(|e| tracing::warn!("probes: no rays over the scene: {e}"))
+            .ok()
+    });
+    r.building = Some((geometry, task));
+    false
 }

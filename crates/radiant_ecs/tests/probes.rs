@@ -112,6 +112,8 @@ fn the_volume_follows_the_bake_and_a_moved_block_without_the_frame_waiting() {
     settle(&mut app);
     let moved = app.world.resource::<BakedProbes>().clone();
     assert!(moved.generation > first.generation && moved.published > first.published);
+    // The rays: built once for the first scene, once again for the moved block.
+    assert_eq!((first.rays_built, moved.rays_built), (1, 2));
     let after = moved.volume.expect("a volume");
     let want = direct_volume(&mut app);
     let mut changed = false;
@@ -147,7 +149,9 @@ fn without_the_setting_no_volume_is_made() {
         app.update();
     }
     let p = app.world.resource::<BakedProbes>();
-    assert!(p.volume.is_none() && !p.in_flight && p.published == 0);
+    assert!(p.volume.is_none() && !p.in_flight && p.published == 0 && p.rays_built == 0);
+    // Nor is the bake's scene kept for them.
+    assert!(app.world.resource::<SceneSnapshot>().scene.is_none());
 }
 
 /// Each new light is sampled twice: a preview volume with fewer rays first, then the full one
@@ -267,8 +271,23 @@ fn an_emitter_changed_mid_bake_relights_the_probes_with_the_new_scene() {
         }
     }
     assert!(lamps > 0, "no emitter");
+    let epoch = app.world.resource::<BakeWorker>().epoch();
     app.update();
+    // The bake's own snapshot of the new scene, the geometry unchanged.
+    let snapshot = app.world.resource::<SceneSnapshot>().clone();
+    assert_eq!(snapshot.epoch, epoch + 1);
+    assert!(snapshot.geometry_epoch < snapshot.epoch);
+    let scene = snapshot.scene.expect("the bake's scene");
+    assert!(
+        scene
+            .surfaces
+            .iter()
+            .any(|s| s.emission.iter().any(|&e| e > 0.0))
+    );
+    assert_eq!(*scene, gather_scene(&mut app.world));
     settle(&mut app);
+    // A material edit: the rays of the scene's triangles are kept.
+    assert_eq!(app.world.resource::<BakedProbes>().rays_built, 1);
     let got = app
         .world
         .resource::<BakedProbes>()

@@ -16,7 +16,7 @@
 
 use std::sync::Arc;
 
-use glam::{DVec3, Vec2};
+use glam::{DVec3, Vec2, Vec3};
 use radiant_scene::texture::{Pyramid, barycentric};
 use radiant_scene::{AlphaMasks, Light, Scene, Sky, Surface, TextureRef};
 use radiant_visibility::{Bvh, Visibility};
@@ -256,17 +256,34 @@ pub fn masks(scene: &Scene) -> Option<Arc<AlphaMasks>> {
 
 /// The BVH over the mesh's input triangles (the scene's, in order), with alpha masks.
 pub fn visibility(mesh: &Mesh, masks: Option<&Arc<AlphaMasks>>) -> Bvh {
-    let tris = mesh.root_triangles_f32();
+    bvh_over(&mesh.root_triangles_f32(), masks)
+}
+
+/// The BVH [`visibility`] builds for any mesh of `scene`, built from the scene alone: its
+/// triangles in order, in the frame the mesh is made in ([`crate::mesh::Frame::of`]). For work
+/// that needs the rays before the bake's mesh of the scene exists (the ECS probes start on it
+/// as soon as an edit is made). The same errors as meshing the scene for a scene without
+/// triangles, of zero extent or with a vertex that is not finite.
+pub fn scene_visibility(scene: &Scene, masks: Option<&Arc<AlphaMasks>>) -> Result<Bvh, BakeError> {
+    let frame = crate::mesh::Frame::of(scene)?;
+    let tris: Vec<[Vec3; 3]> = (scene.triangles.iter())
+        .map(|t| t.vertices.map(|p| frame.to_local(p).as_vec3()))
+        .collect();
+    Ok(bvh_over(&tris, masks))
+}
+
+/// The BVH over triangles (the scene's, in order, in the mesh's frame), with alpha masks.
+fn bvh_over(tris: &[[Vec3; 3]], masks: Option<&Arc<AlphaMasks>>) -> Bvh {
     match masks {
         Some(masks) => {
             let (marks, masks) = (Arc::clone(masks), Arc::clone(masks));
             Bvh::with_filter(
-                &tris,
+                tris,
                 move |t| marks.is_masked(t),
                 Arc::new(move |t, u, v| masks.blocks(t, u, v)),
             )
         }
-        None => Bvh::new(&tris),
+        None => Bvh::new(tris),
     }
 }
 
@@ -566,4 +583,56 @@ pub fn sources(rho: &[Rgb], emission: &[Rgb], direct: Option<&[Rgb]>) -> Vec<Rgb
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::MeshParams;
+
+    /// The BVH built from the scene alone answers every ray as the one built from its mesh,
+    /// bit for bit, far from the origin too; a scene without triangles is a typed error.
+    #[test]
+    fn the_scenes_rays_are_the_meshs() {
+        let mut scene = radiant_scene::builtin("cornell-box").expect("builtin");
+        for t in &mut scene.triangles {
+            for v in &mut t.vertices {
+                *v += DVec3::new(4.0e5, -3.0e5, 1.0e5);
+            }
+        }
+        let mesh = Mesh::adaptive(&scene, &MeshParams::default(), &mut |_| Ok(())).expect("mesh");
+        let (a, b) = (
+            visibility(&mesh, None),
+            scene_visibility(&scene, None).expect("rays"),
+        );
+        let mut s = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+        };
+        let mut hits = 0;
+        for _ in 0..4000 {
+            let o = Vec3::new(next(), next(), next()) * 0.9;
+            let d = Vec3::new(next(), next(), next());
+            let (ha, hb) = (
+                a.closest_hit(o, d, f32::INFINITY),
+                b.closest_hit(o, d, f32::INFINITY),
+            );
+            assert_eq!(
+                ha.map(|h| (h.triangle, h.t.to_bits())),
+                hb.map(|h| (h.triangle, h.t.to_bits()))
+            );
+            hits += usize::from(ha.is_some());
+            let e = o + d * 0.3;
+            assert_eq!(a.segment_clear(o, e), b.segment_clear(o, e));
+        }
+        assert!(hits > 2000, "{hits} of 4000 rays hit the box");
+        scene.triangles.clear();
+        assert!(matches!(
+            scene_visibility(&scene, None),
+            Err(BakeError::InvalidScene(SceneError::NoTriangles))
+        ));
+    }
 }

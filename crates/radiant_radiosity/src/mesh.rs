@@ -25,6 +25,12 @@ pub struct Frame {
 }
 
 impl Frame {
+    /// The frame every mesh of `scene` is made in: the centre and largest extent of its
+    /// bounding box. A typed error for a scene without triangles, of zero extent or with a
+    /// vertex that is not finite.
+    pub fn of(scene: &Scene) -> Result<Frame, BakeError> {
+        frame_of(scene)
+    }
     /// World → local.
     pub fn to_local(&self, p: DVec3) -> DVec3 {
         (p - self.center) / self.scale

@@ -226,6 +226,20 @@ pub struct BakedLighting {
     pub preview: bool,
 }
 
+/// The world's scene as the bake last gathered it, for other work that follows the bake (the
+/// probes): filled at every change the bake absorbs, only while this resource exists, so the
+/// scene is not gathered on the frame a second time for the same change.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct SceneSnapshot {
+    /// The bake's epoch ([`BakeWorker::epoch`]) the scene matches.
+    pub epoch: u64,
+    /// The epoch at which static geometry last changed (or the bake started over): what is
+    /// built over the triangles alone (rays) stays valid while it is the same.
+    pub geometry_epoch: u64,
+    /// The scene at `epoch`; its holder may drop it (to free it) and gather it again.
+    pub scene: Option<Arc<Scene>>,
+}
+
 /// Requests to the bake; take effect on the next frame.
 #[derive(Resource, Clone, Copy, Debug, Default)]
 pub struct BakeControl {
@@ -659,18 +673,20 @@ fn absorb_changes(world: &mut World, changes: SceneChanges, control: BakeControl
         no_emitters(world);
         return false;
     }
+    let scene = Arc::new(scene);
     let mut w = world.resource_mut::<BakeWorker>();
     w.epoch += 1;
+    let epoch = w.epoch;
     if control.rebake || !w.holds_a_bake() || w.rebuild_pending() {
         // Nothing to edit, or a rebuild already waits: bake the scene as it is now.
         w.cancel_running();
-        w.pending = Some(Pending::Rebuild(Arc::new(scene)));
+        w.pending = Some(Pending::Rebuild(scene.clone()));
     } else if changes.geometry {
         // A rigid move keeps what it does not touch; the worker rebuilds if it is not one.
         w.edit(Edit {
             surfaces: scene.surfaces.clone(),
             lights: None,
-            geometry: Some(Arc::new(scene)),
+            geometry: Some(scene.clone()),
         });
     } else {
         // Merge with an edit still waiting: a pending move carries the whole scene.
@@ -683,17 +699,24 @@ fn absorb_changes(world: &mut World, changes: SceneChanges, control: BakeControl
         };
         let geometry = (waiting.as_ref())
             .and_then(|e| e.geometry.as_ref())
-            .map(|_| Arc::new(scene.clone()));
+            .map(|_| scene.clone());
         let lights = (changes.lights)
             .then(|| (scene.lights.clone(), scene.sky.clone()))
             .or_else(|| waiting.and_then(|e| e.lights));
         w.edit(Edit {
-            surfaces: scene.surfaces,
+            surfaces: scene.surfaces.clone(),
             lights,
             geometry,
         });
     }
     world.resource_mut::<BakeStatus>().stale = true;
+    if let Some(mut snapshot) = world.get_resource_mut::<SceneSnapshot>() {
+        if rebuild {
+            snapshot.geometry_epoch = epoch;
+        }
+        snapshot.epoch = epoch;
+        snapshot.scene = Some(scene);
+    }
     true
 }
 
