@@ -11,9 +11,10 @@
 //! [`ProbeVolumeBake::preview_strata`]), so moved geometry relights the probes soon, then the
 //! full volume for the same light replaces it ([`BakedProbes::preview`] tells which is shown;
 //! an edit's first look gets the preview alone: its solved light follows). The rays (a BVH
-//! over the scene's triangles) are built in a task of their own as soon as the bake takes in
-//! a geometry change, from the scene it gathered ([`SceneSnapshot`]), so they are ready, or
-//! nearly, when the edit's first light comes; they are kept while the geometry stays.
+//! over the scene's triangles) are made in a task of their own as soon as the bake takes in
+//! a geometry change, from the scene it gathered ([`SceneSnapshot`]): a moved prop is patched
+//! into the last BVH built ([`SceneRays`]), so the rays are ready when the edit's first light
+//! comes; they are kept while the geometry stays.
 //! Without [`ProbeVolumeBake`] nothing is sampled and nothing allocated: a scene with nothing
 //! that moves does not pay for probes.
 
@@ -23,6 +24,7 @@ use std::time::Instant;
 use bevy_ecs::prelude::*;
 use bevy_tasks::{AsyncComputeTaskPool, Task, futures::check_ready};
 use radiant_probes::{ProbeBaker, ProbeParams, ProbeVolume, VolumeParams};
+use radiant_radiosity::input::SceneRays;
 
 use crate::app::{App, Plugin, PostUpdate};
 use crate::bake::{BakePhase, BakeStatus, BakeSystems, BakeWorker, BakedLighting, SceneSnapshot};
@@ -78,18 +80,29 @@ pub struct BakedProbes {
     pub preview: bool,
     /// Volumes published so far.
     pub published: u64,
-    /// Rays (a BVH over the scene's triangles) built so far: one for each change of static
-    /// geometry the bake takes in, none for a material or light edit.
+    /// Rays (a BVH over the scene's triangles) built so far: for the first scene and for each
+    /// change of static geometry that could not be patched in; none for a material or light
+    /// edit.
     pub rays_built: u64,
+    /// Changes of static geometry patched into the last rays built (a prop moved: only its
+    /// triangles get a BVH, [`SceneRays::patched`]).
+    pub rays_patched: u64,
 }
 
 /// Per probe, [`ProbeVolume::h_harmonics`]: nine RGB coefficients and whether it is valid.
 pub type Harmonics = Vec<([[f64; 3]; 9], bool)>;
 
-/// The [`SceneSnapshot::geometry_epoch`] rays were built for, and the rays over the scene's
-/// triangles (its BVH, alpha masks included; `None`: the scene had none to build, as the
-/// bake says too).
-type Rays = (u64, Option<Arc<radiant_visibility::Bvh>>);
+/// The [`SceneSnapshot::geometry_epoch`] rays were made for, and the rays over the scene's
+/// triangles (alpha masks included; `None`: the scene had none to build, as the bake says
+/// too).
+type Rays = (u64, Option<Arc<radiant_radiosity::input::Rays>>);
+
+/// What a rays task returns: the rays, and the scene's own BVH when it built one (else it
+/// patched the last one).
+type MadeRays = (
+    Option<radiant_radiosity::input::Rays>,
+    Option<Arc<SceneRays>>,
+);
 
 /// What the sampling task returns: the volume, its harmonics and the seconds they took.
 type Sampled = (ProbeVolume, Harmonics, f64);
@@ -98,13 +111,14 @@ type Sampled = (ProbeVolume, Harmonics, f64);
 #[derive(Resource, Default)]
 struct ProbeTask(Option<(u64, bool, Task<Sampled>)>);
 
-/// The rays of the scene's geometry, kept while it stays (on Sponza, 262 k triangles, the BVH
-/// takes ~1 s to build, the preview's rays ~0.1 s), and the task building them for a newer
-/// geometry.
+/// The rays of the scene's geometry, kept while it stays, the last BVH built
+/// ([`SceneRays`]: a moved prop is patched into it, on Sponza in milliseconds where the whole
+/// BVH takes ~0.5 s), and the task making them for a newer geometry.
 #[derive(Resource, Default)]
 struct ProbeRays {
     rays: Option<Rays>,
-    building: Option<(u64, Task<Option<radiant_visibility::Bvh>>)>,
+    built: Option<Arc<SceneRays>>,
+    building: Option<(u64, Task<MadeRays>)>,
 }
 
 /// System set of [`drive_probes`], after the bake's.
@@ -158,11 +172,20 @@ pub fn drive_probes(world: &mut World) {
         Some((_, task)) => check_ready(task),
         None => None,
     };
-    if let Some(bvh) = built {
+    if let Some((rays, new_bvh)) = built {
         let mut r = world.resource_mut::<ProbeRays>();
         let geometry = r.building.take().map_or(0, |(g, _)| g);
-        r.rays = Some((geometry, bvh.map(Arc::new)));
-        world.resource_mut::<BakedProbes>().rays_built += 1;
+        r.rays = Some((geometry, rays.map(Arc::new)));
+        let was_built = new_bvh.is_some();
+        if was_built {
+            r.built = new_bvh;
+        }
+        let mut p = world.resource_mut::<BakedProbes>();
+        if was_built {
+            p.rays_built += 1;
+        } else {
+            p.rays_patched += 1;
+        }
     }
     let running = world.resource::<ProbeTask>().0.is_some();
     world.resource_mut::<BakedProbes>().in_flight = running;
@@ -254,13 +277,21 @@ fn rays_ready(world: &mut World, geometry: u64) -> bool {
     }
     let scene = current_scene(world);
     let mut r = world.resource_mut::<ProbeRays>();
-    // The old rays go first: no two BVHs of a level at once.
     r.rays = None;
+    let last = r.built.clone();
     let task = AsyncComputeTaskPool::get().spawn(async move {
-        let masks = radiant_radiosity::input::masks(&scene);
-        radiant_radiosity::input::scene_visibility(&scene, masks.as_ref())
-            .inspect_err(|e| tracing::warn!("probes: no rays over the scene: {e}"))
-            .ok()
+        if let Some(rays) = last.as_ref().and_then(|l| l.patched(&scene)) {
+            return (Some(rays), None);
+        }
+        // The old BVH goes first: no two BVHs of a level at once.
+        drop(last);
+        match SceneRays::new(&scene) {
+            Ok(built) => (Some(built.rays()), Some(Arc::new(built))),
+            Err(e) => {
+                tracing::warn!("probes: no rays over the scene: {e}");
+                (None, None)
+            }
+        }
     });
     r.building = Some((geometry, task));
     false

@@ -112,8 +112,11 @@ fn the_volume_follows_the_bake_and_a_moved_block_without_the_frame_waiting() {
     settle(&mut app);
     let moved = app.world.resource::<BakedProbes>().clone();
     assert!(moved.generation > first.generation && moved.published > first.published);
-    // The rays: built once for the first scene, once again for the moved block.
-    assert_eq!((first.rays_built, moved.rays_built), (1, 2));
+    // The rays: built once for the first scene, the moved block patched in.
+    assert_eq!(
+        (first.rays_built, moved.rays_built, moved.rays_patched),
+        (1, 1, 1)
+    );
     let after = moved.volume.expect("a volume");
     let want = direct_volume(&mut app);
     let mut changed = false;
@@ -150,6 +153,7 @@ fn without_the_setting_no_volume_is_made() {
     }
     let p = app.world.resource::<BakedProbes>();
     assert!(p.volume.is_none() && !p.in_flight && p.published == 0 && p.rays_built == 0);
+    assert_eq!(p.rays_patched, 0);
     // Nor is the bake's scene kept for them.
     assert!(app.world.resource::<SceneSnapshot>().scene.is_none());
 }
@@ -287,7 +291,8 @@ fn an_emitter_changed_mid_bake_relights_the_probes_with_the_new_scene() {
     assert_eq!(*scene, gather_scene(&mut app.world));
     settle(&mut app);
     // A material edit: the rays of the scene's triangles are kept.
-    assert_eq!(app.world.resource::<BakedProbes>().rays_built, 1);
+    let p = app.world.resource::<BakedProbes>();
+    assert_eq!((p.rays_built, p.rays_patched), (1, 0));
     let got = app
         .world
         .resource::<BakedProbes>()

@@ -17,6 +17,7 @@
 //! assert!((hit.t - 1.0).abs() < 1e-6);
 //! ```
 
+use std::borrow::Borrow;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -537,46 +538,67 @@ impl Visibility for Bvh {
 
 /// A BVH seen with some of its triangles taken away and others added, without building it
 /// again: what a quick look at an edit traces against while the edited scene's own BVH is
-/// still to be built. Hits on the added triangles carry the index `base count + i`.
-pub struct Patched<'a> {
-    base: &'a Bvh,
+/// still to be built. The base is held as `B`: borrowed (`&Bvh`) or shared (`Arc<Bvh>`, for a
+/// task that outlives the caller). Hits on the added triangles carry the index
+/// `base count + i`, or the index [`Patched::renumbered`] gives them.
+pub struct Patched<B> {
+    base: B,
     /// By the base's (the caller's) index: the triangles taken away.
     removed: Vec<bool>,
     added: Bvh,
+    /// The index a hit on added triangle `i` carries, when renumbered.
+    added_ids: Option<Vec<u32>>,
 }
 
-impl<'a> Patched<'a> {
+impl<B: Borrow<Bvh>> Patched<B> {
     /// `base` without the triangles `removed` marks (by the index given to its constructor),
     /// with `added`.
-    pub fn new(base: &'a Bvh, removed: Vec<bool>, added: Bvh) -> Self {
+    pub fn new(base: B, removed: Vec<bool>, added: Bvh) -> Self {
         Patched {
             base,
             removed,
             added,
+            added_ids: None,
         }
+    }
+
+    /// Hits on added triangle `i` carry `ids[i]` (an index of the edited scene, say, where the
+    /// base's triangles keep theirs); `ids` has one entry per added triangle.
+    pub fn renumbered(mut self, ids: Vec<u32>) -> Self {
+        self.added_ids = Some(ids);
+        self
     }
 }
 
-impl Visibility for Patched<'_> {
+impl<B: Borrow<Bvh> + Send + Sync> Visibility for Patched<B> {
     fn segment_clear(&self, a: Vec3, b: Vec3) -> bool {
         self.added.segment_clear(a, b)
-            && (self.base).segment_clear_without(a, b, Some(&self.removed), None, &mut { NO_HINT })
+            && (self.base.borrow())
+                .segment_clear_without(a, b, Some(&self.removed), None, &mut { NO_HINT })
     }
 
     fn segment_clear_between(&self, a: Vec3, b: Vec3, ends: &Ends) -> bool {
         self.added.segment_clear_between(a, b, ends)
-            && (self.base)
-                .segment_clear_without(a, b, Some(&self.removed), Some(ends), &mut { NO_HINT })
+            && (self.base.borrow()).segment_clear_without(
+                a,
+                b,
+                Some(&self.removed),
+                Some(ends),
+                &mut { NO_HINT },
+            )
     }
 
     fn closest_hit(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit> {
+        let base = self.base.borrow();
         let near = self.added.closest_hit(origin, dir, tmax).map(|mut h| {
-            h.triangle += self.base.ids.len() as u32;
+            h.triangle = match &self.added_ids {
+                Some(ids) => ids[h.triangle as usize],
+                None => h.triangle + base.ids.len() as u32,
+            };
             h
         });
         let limit = near.map_or(tmax, |h| h.t);
-        (self.base)
-            .closest_hit_without(origin, dir, limit, Some(&self.removed))
+        base.closest_hit_without(origin, dir, limit, Some(&self.removed))
             .or(near)
     }
 }
@@ -871,8 +893,15 @@ mod tests {
             .chain(added.iter().copied())
             .collect();
         let base = Bvh::new(&tris);
-        let patched = Patched::new(&base, removed, Bvh::new(&added));
+        let patched = Patched::new(&base, removed.clone(), Bvh::new(&added));
         let brute = BruteForce::new(&after);
+        // The same, shared and renumbered: added triangle i is 1000 + i.
+        let shared = Patched::new(
+            std::sync::Arc::new(Bvh::new(&tris)),
+            removed.clone(),
+            Bvh::new(&added),
+        )
+        .renumbered((0..added.len() as u32).map(|i| 1000 + i).collect());
         let (mut blocked, mut changed) = (0, 0);
         for _ in 0..4000 {
             let (a, b) = (rng.v() * 1.5, rng.v() * 1.5);
@@ -888,6 +917,19 @@ mod tests {
                 (Some(x), Some(y)) => assert!((x.t - y.t).abs() < 1e-5, "{x:?} {y:?}"),
                 (None, None) => {}
                 other => panic!("patched and brute force disagree: {other:?}"),
+            }
+            let h3 = shared.closest_hit(a, b - a, f32::INFINITY);
+            assert_eq!(h1.map(|h| h.t.to_bits()), h3.map(|h| h.t.to_bits()));
+            if let (Some(x), Some(y)) = (h1, h3) {
+                // The base's triangles keep their index, the added ones get theirs.
+                let n = tris.len() as u32;
+                let want = if x.triangle >= n {
+                    x.triangle - n + 1000
+                } else {
+                    x.triangle
+                };
+                assert_eq!(y.triangle, want);
+                assert!(x.triangle >= n || !removed[x.triangle as usize]);
             }
         }
         // Both what was taken away and what was added must have mattered.

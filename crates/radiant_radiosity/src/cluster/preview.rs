@@ -188,7 +188,7 @@ struct Traced<'a> {
     old: &'a Before<'a>,
     mesh: &'a Mesh,
     matched: &'a RootMatch,
-    vis: &'a Patched<'a>,
+    vis: &'a Patched<&'a Bvh>,
     came: &'a [(u32, u32)],
 }
 
@@ -245,7 +245,7 @@ fn retrace(
     old: &Before,
     (mesh, matched): (&Mesh, &RootMatch),
     lit: &Lit,
-    vis: &Patched,
+    vis: &Patched<&Bvh>,
 ) -> (Vec<u32>, Vec<Rgb>) {
     let (lo, hi) = changed_bounds(&matched.changed_triangles(old.mesh, mesh));
     let moved = |leaf: u32| matched.added[mesh.leaf_node(leaf).root as usize];
@@ -361,7 +361,7 @@ fn patched<'a>(
     mesh: &Mesh,
     matched: &RootMatch,
     came: &[(u32, u32)],
-) -> Patched<'a> {
+) -> Patched<&'a Bvh> {
     let removed: Vec<bool> = matched.kept.iter().map(|k| !k).collect();
     let tris: Vec<[glam::Vec3; 3]> = (came.iter())
         .map(|&(r, _)| {
