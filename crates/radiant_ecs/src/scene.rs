@@ -345,3 +345,65 @@ fn gather(world: &mut World, with_dynamic: bool) -> Scene {
     });
     scene
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The scene gathered back from the world is the one spawned, in order; a mirrored surface
+    /// comes back rewound (its faces still in front of its shading normals), the others as
+    /// they were.
+    #[test]
+    fn the_gathered_scene_is_the_spawned_one_and_a_mirror_rewinds() {
+        let scene = radiant_scene::builtin("cornell-box").expect("builtin");
+        let mut app = App::new();
+        app.add_plugins(ScenePlugin);
+        spawn_scene(&mut app.world, &scene);
+        app.update();
+        let back = gather_scene(&mut app.world);
+        assert_eq!(back.surfaces.len(), scene.surfaces.len());
+        assert_eq!(back.triangles.len(), scene.triangles.len());
+        for (a, b) in back.triangles.iter().zip(&scene.triangles) {
+            assert_eq!((a.vertices, a.surface, a.uv), (b.vertices, b.surface, b.uv));
+            for k in 0..3 {
+                assert!(a.normals[k].distance(b.normals[k]) < 1e-6);
+            }
+        }
+        let mirrored = (scene.surfaces.iter())
+            .position(|s| s.name.starts_with("short_block"))
+            .expect("a block") as u32;
+        let mut q = app.world.query::<(&SurfaceOrder, &mut Transform)>();
+        for (order, mut t) in q.iter_mut(&mut app.world) {
+            if order.0 == mirrored {
+                t.scale.x = -1.0;
+            }
+        }
+        app.update();
+        let back = gather_scene(&mut app.world);
+        assert_eq!(back.triangles.len(), scene.triangles.len());
+        let mut seen = 0;
+        for (a, b) in back.triangles.iter().zip(&scene.triangles) {
+            if a.surface != mirrored {
+                assert_eq!(a.vertices, b.vertices);
+                continue;
+            }
+            seen += 1;
+            let v = a.vertices;
+            let face = (v[1] - v[0]).cross(v[2] - v[0]);
+            for n in a.normals {
+                assert!(face.dot(n.as_dvec3()) > 0.0, "a mirrored face turned away");
+            }
+            let mirror = |p: DVec3| DVec3::new(-p.x, p.y, p.z);
+            let mut want: Vec<[i64; 3]> = (b.vertices.iter())
+                .map(|&p| (mirror(p) * 1e9).round().as_i64vec3().to_array())
+                .collect();
+            let mut got: Vec<[i64; 3]> = (v.iter())
+                .map(|&p| (p * 1e9).round().as_i64vec3().to_array())
+                .collect();
+            want.sort();
+            got.sort();
+            assert_eq!(got, want);
+        }
+        assert!(seen > 0);
+    }
+}
