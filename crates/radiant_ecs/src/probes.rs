@@ -97,11 +97,12 @@ pub type Harmonics = Vec<([[f64; 3]; 9], bool)>;
 /// too).
 type Rays = (u64, Option<Arc<radiant_radiosity::input::Rays>>);
 
-/// What a rays task returns: the rays, and the scene's own BVH when it built one (else it
-/// patched the last one).
+/// What a rays task returns: the rays, the last BVH built (the one it was given, or the
+/// scene's own), and whether it built that one (else it patched the one it was given).
 type MadeRays = (
     Option<radiant_radiosity::input::Rays>,
     Option<Arc<SceneRays>>,
+    bool,
 );
 
 /// What the sampling task returns: the volume, its harmonics and the seconds they took.
@@ -172,18 +173,16 @@ pub fn drive_probes(world: &mut World) {
         Some((_, task)) => check_ready(task),
         None => None,
     };
-    if let Some((rays, new_bvh)) = built {
+    if let Some((rays, last, was_built)) = built {
         let mut r = world.resource_mut::<ProbeRays>();
         let geometry = r.building.take().map_or(0, |(g, _)| g);
+        let made = rays.is_some();
         r.rays = Some((geometry, rays.map(Arc::new)));
-        let was_built = new_bvh.is_some();
-        if was_built {
-            r.built = new_bvh;
-        }
+        r.built = last;
         let mut p = world.resource_mut::<BakedProbes>();
         if was_built {
             p.rays_built += 1;
-        } else {
+        } else if made {
             p.rays_patched += 1;
         }
     }
@@ -278,18 +277,20 @@ fn rays_ready(world: &mut World, geometry: u64) -> bool {
     let scene = current_scene(world);
     let mut r = world.resource_mut::<ProbeRays>();
     r.rays = None;
-    let last = r.built.clone();
+    // The last BVH goes to the task, and comes back with its rays or a new one.
+    let last = r.built.take();
     let task = AsyncComputeTaskPool::get().spawn(async move {
         if let Some(rays) = last.as_ref().and_then(|l| l.patched(&scene)) {
-            return (Some(rays), None);
+            return (Some(rays), last, false);
         }
-        // The old BVH goes first: no two BVHs of a level at once.
+        // The old BVH goes first: no two BVHs of a level at once (a volume still sampling
+        // with it keeps it until it ends).
         drop(last);
         match SceneRays::new(&scene) {
-            Ok(built) => (Some(built.rays()), Some(Arc::new(built))),
+            Ok(built) => (Some(built.rays()), Some(Arc::new(built)), true),
             Err(e) => {
                 tracing::warn!("probes: no rays over the scene: {e}");
-                (None, None)
+                (None, None, false)
             }
         }
     });

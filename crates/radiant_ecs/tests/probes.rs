@@ -7,6 +7,15 @@ use radiant_ecs::prelude::*;
 use radiant_probes::{ProbeBaker, ProbeParams, ProbeVolume, VolumeParams};
 use radiant_radiosity::{Bake, BakeParams, SolverKind};
 
+/// The tests here run one at a time: they share bevy's async compute pool (two threads, one
+/// process), and a bake worker of one test holding a thread for seconds would delay another's
+/// probes past the light they wait for (an edit's preview lasts until its first sweep).
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    static ONE: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    ONE.lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 fn params() -> BakeParams {
     let mut p = BakeParams::default();
     p.mesh.patch_size = 0.3;
@@ -81,6 +90,7 @@ const BESIDE: [DVec3; 2] = [DVec3::new(0.32, 0.08, 0.15), DVec3::new(0.05, 0.08,
 
 #[test]
 fn the_volume_follows_the_bake_and_a_moved_block_without_the_frame_waiting() {
+    let _one = one_at_a_time();
     let mut app = cornell_app(true);
     let waited_for_none = settle(&mut app);
     assert!(
@@ -142,6 +152,7 @@ fn the_volume_follows_the_bake_and_a_moved_block_without_the_frame_waiting() {
 
 #[test]
 fn without_the_setting_no_volume_is_made() {
+    let _one = one_at_a_time();
     let mut app = cornell_app(false);
     let t = std::time::Instant::now();
     app.run_until(u64::MAX, Duration::from_millis(1), |w| {
@@ -162,6 +173,7 @@ fn without_the_setting_no_volume_is_made() {
 /// for the same light, which replaces it.
 #[test]
 fn a_preview_volume_comes_first_and_the_full_one_replaces_it() {
+    let _one = one_at_a_time();
     let mut app = cornell_app(true);
     let t = std::time::Instant::now();
     // The preview published for each light, kept as the frames pass.
@@ -222,6 +234,7 @@ fn a_preview_volume_comes_first_and_the_full_one_replaces_it() {
 /// solved light: on Sponza 10 s after the move instead of 0.6 s).
 #[test]
 fn an_edits_first_look_at_its_light_relights_the_probes() {
+    let _one = one_at_a_time();
     let mut app = cornell_app_with(true, radiant_radiosity::cluster::Hierarchy::Clustered);
     settle(&mut app);
     let mut q = app.world.query::<(&Name, &mut Transform)>();
@@ -257,6 +270,7 @@ fn an_edits_first_look_at_its_light_relights_the_probes() {
 /// volume a direct bake of the brighter scene gives.
 #[test]
 fn an_emitter_changed_mid_bake_relights_the_probes_with_the_new_scene() {
+    let _one = one_at_a_time();
     let mut app = cornell_app(true);
     let t = std::time::Instant::now();
     let ok = app.run_until(u64::MAX, Duration::from_millis(1), |w| {
