@@ -343,18 +343,7 @@ impl SceneRays {
                 (scene.triangles[i as usize].vertices).map(|p| self.frame.to_local(p).as_vec3())
             })
             .collect();
-        let added = match &self.masks {
-            Some(masks) => {
-                let (marks, masks) = (Arc::clone(masks), Arc::clone(masks));
-                let (of, of2) = (Arc::new(ids.clone()), Arc::new(ids.clone()));
-                Bvh::with_filter(
-                    &tris,
-                    move |k| marks.is_masked(of[k as usize]),
-                    Arc::new(move |k: u32, u: f32, v: f32| masks.blocks(of2[k as usize], u, v)),
-                )
-            }
-            None => Bvh::new(&tris),
-        };
+        let added = masked_bvh(&tris, self.masks.as_ref(), Some(Arc::new(ids.clone())));
         Some(Rays::Patched(Box::new(
             Patched::new(self.bvh.clone(), removed, added).renumbered(ids),
         )))
@@ -427,17 +416,26 @@ impl Visibility for Rays {
 
 /// The BVH over triangles (the scene's, in order, in the mesh's frame), with alpha masks.
 fn bvh_over(tris: &[[Vec3; 3]], masks: Option<&Arc<AlphaMasks>>) -> Bvh {
-    match masks {
-        Some(masks) => {
-            let (marks, masks) = (Arc::clone(masks), Arc::clone(masks));
-            Bvh::with_filter(
-                tris,
-                move |t| marks.is_masked(t),
-                Arc::new(move |t, u, v| masks.blocks(t, u, v)),
-            )
-        }
-        None => Bvh::new(tris),
-    }
+    masked_bvh(tris, masks, None)
+}
+
+/// The BVH over triangles whose `k`-th is scene triangle `ids[k]` (`None`: `k` itself), each
+/// with its alpha mask.
+fn masked_bvh(
+    tris: &[[Vec3; 3]],
+    masks: Option<&Arc<AlphaMasks>>,
+    ids: Option<Arc<Vec<u32>>>,
+) -> Bvh {
+    let Some(masks) = masks else {
+        return Bvh::new(tris);
+    };
+    let id = move |k: u32| ids.as_ref().map_or(k, |ids| ids[k as usize]);
+    let (marks, masks, id2) = (Arc::clone(masks), Arc::clone(masks), id.clone());
+    Bvh::with_filter(
+        tris,
+        move |k| marks.is_masked(id(k)),
+        Arc::new(move |k, u, v| masks.blocks(id2(k), u, v)),
+    )
 }
 
 /// Per element: its UV footprint's texture mean over the whole texture's, per channel, for
@@ -837,6 +835,88 @@ mod tests {
         let mut fewer = moved.clone();
         fewer.triangles.pop();
         assert!(rays.patched(&fewer).is_none(), "another triangle count");
+        // A blocker whose alpha mask is cut over its right half (x > 0.5), moved 5 cm along z
+        // inside the scene's bounds (its UVs kept): patched in, rays pass where it is cut and stop where it is not, as
+        // through its own BVH built with the masks.
+        let mut masked = Scene::default();
+        let quad = |o: DVec3, a: DVec3, b: DVec3, s: u32| {
+            let (p, q, r, t) = (o, o + a, o + a + b, o + b);
+            let mut tris = [
+                radiant_scene::Triangle::new([p, q, r], s),
+                radiant_scene::Triangle::new([p, r, t], s),
+            ];
+            for t in &mut tris {
+                t.uv[0] = t.vertices.map(|v| glam::Vec2::new(v.x as f32, v.z as f32));
+            }
+            tris
+        };
+        masked
+            .triangles
+            .extend(quad(DVec3::ZERO, DVec3::Z, DVec3::X, 0));
+        masked.triangles.extend(quad(
+            DVec3::new(0.2, 0.3, 0.2),
+            DVec3::Z * 0.6,
+            DVec3::X * 0.6,
+            1,
+        ));
+        let mut blocker = radiant_scene::Surface {
+            name: "blocker".into(),
+            alpha: radiant_scene::AlphaMode::Mask { cutoff: 0.5 },
+            ..Default::default()
+        };
+        blocker.base_color_texture = Some(radiant_scene::TextureRef {
+            image: 0,
+            sampler: radiant_scene::texture::Sampler {
+                nearest: true,
+                ..Default::default()
+            },
+            tex_coord: 0,
+            transform: Default::default(),
+        });
+        masked.surfaces = vec![
+            radiant_scene::Surface {
+                name: "floor".into(),
+                ..Default::default()
+            },
+            blocker,
+        ];
+        masked.images = vec![radiant_scene::Image {
+            name: "half".into(),
+            width: 2,
+            height: 1,
+            pixels: vec![255, 255, 255, 255, 255, 255, 255, 0].into(),
+        }];
+        let rays = SceneRays::new(&masked).expect("rays");
+        let mut slid = masked.clone();
+        for t in slid.triangles.iter_mut().filter(|t| t.surface == 1) {
+            t.vertices = t.vertices.map(|v| v + DVec3::new(0.0, 0.0, 0.05));
+        }
+        let patched = rays.patched(&slid).expect("patched");
+        let own = scene_visibility(&slid, masks(&slid).as_ref()).expect("rays");
+        let frame = Frame::of(&slid).expect("frame");
+        let (mut through, mut stopped) = (0, 0);
+        for i in 0..400 {
+            // Straight down through the blocker's plane, over the floor.
+            let (x, z) = (
+                0.25 + 0.5 * f64::from(i % 20) / 19.0,
+                0.3 + 0.4 * f64::from(i / 20) / 19.0,
+            );
+            let o = frame.to_local(DVec3::new(x, 0.6, z)).as_vec3();
+            let (hp, ho) = (
+                patched.closest_hit(o, Vec3::NEG_Y, f32::INFINITY),
+                own.closest_hit(o, Vec3::NEG_Y, f32::INFINITY),
+            );
+            assert_eq!(hp.map(|h| h.triangle), ho.map(|h| h.triangle), "at {x} {z}");
+            match hp.map(|h| slid.triangles[h.triangle as usize].surface) {
+                Some(0) => through += 1,
+                Some(_) => stopped += 1,
+                None => {}
+            }
+        }
+        assert!(
+            through > 100 && stopped > 100,
+            "{through} through, {stopped} stopped"
+        );
         scene.triangles.clear();
         assert!(matches!(
             scene_visibility(&scene, None),
