@@ -313,3 +313,83 @@ fn a_box_standing_or_lifted_a_millimetre_lights_the_floor_the_same() {
         }
     }
 }
+
+/// The gather's translational gradient (Ward & Heckbert) against a closed form: a floor point
+/// under a uniform sky beside a black wall 1 m high sees `H = 1 − F(point → wall)` (Lambert's
+/// contour integral); the gradient away from the wall, from the same rays as the value, agrees
+/// with the closed form's derivative within 20 %, and along the wall it is nil. Averaged over
+/// 16 seeds of 4 096 rays (a sign or a missing factor is off by 100 % or more). The estimate
+/// is high near the wall, by less as the strata grow (0.3 m from it: +70 % at 8 strata, +43 %
+/// at 16, +23 % at 32, +12 % at 64): a ray that meets the wall below its top edge is nearer
+/// than the edge, and the estimate divides by the nearer hit's distance.
+#[test]
+fn the_gathers_gradient_away_from_a_wall_is_the_closed_forms() {
+    use radiant_radiosity::final_gather::FinalGather;
+    use radiant_radiosity::form_factors::analytic::point_to_triangle;
+    use radiant_radiosity::scenes::quad;
+    use radiant_radiosity::smooth::SmoothField;
+    let mut scene = Scene::default();
+    let floor = quad(
+        DVec3::new(0.0, 0.0, -10.0),
+        DVec3::Z * 20.0,
+        DVec3::X * 10.0,
+    );
+    add_surface(&mut scene, "floor", [0.5; 3], [0.0; 3], &floor);
+    let wall = quad(DVec3::new(0.0, 0.0, -10.0), DVec3::Y, DVec3::Z * 20.0);
+    add_surface(&mut scene, "wall", [0.0; 3], [0.0; 3], &wall);
+    scene.sky = Some(radiant_scene::Sky::Uniform { radiance: [1.0; 3] });
+    let mut bake = BakeParams::default();
+    bake.mesh.patch_size = 2.0;
+    let r = common::bake(&scene, &bake);
+    let vis = radiant_radiosity::input::visibility(&r.mesh, None);
+    let field = SmoothField::new(&r.mesh, &r.system, &scene.surfaces, &r.radiosity);
+    let gather = FinalGather::new(
+        &scene,
+        &r.mesh,
+        &field,
+        &vis,
+        GatherParams {
+            strata: 64,
+            ..GatherParams::default()
+        },
+    );
+    let exact = |x: f64| {
+        let p = DVec3::new(x, 0.0, 0.0);
+        1.0 - wall
+            .iter()
+            .map(|t| point_to_triangle(p, DVec3::Y, t, DVec3::X))
+            .sum::<f64>()
+    };
+    let frame = r.mesh.frame;
+    for x in [0.3, 0.7, 1.5] {
+        let (dx, seeds) = (1e-4, 16u64);
+        let (lo, hi) = (
+            frame.to_local(DVec3::new(x - dx, 0.0, 0.0)),
+            frame.to_local(DVec3::new(x + dx, 0.0, 0.0)),
+        );
+        let away = (hi - lo).normalize();
+        let slope = (exact(x + dx) - exact(x - dx)) / hi.distance(lo);
+        let here = frame.to_local(DVec3::new(x, 0.0, 0.0));
+        let (mut along_x, mut along_z, mut h) = (0.0, 0.0, 0.0);
+        for key in 0..seeds {
+            let g = gather.reflected_with_gradient(here, DVec3::Y, key);
+            along_x += g.gradient[0].dot(away) / seeds as f64;
+            along_z += g.gradient[0].dot(DVec3::Z) / seeds as f64;
+            h += g.h[0] / seeds as f64;
+        }
+        eprintln!(
+            "x {x}: H {h:.4} (exact {:.4}), slope {along_x:.4} (exact {slope:.4}), along the wall {along_z:.4}",
+            exact(x)
+        );
+        assert!((h - exact(x)).abs() < 0.01, "H at {x}: {h}");
+        assert!(slope > 0.0);
+        assert!(
+            (along_x - slope).abs() < 0.2 * slope,
+            "the gradient at {x}: {along_x} against {slope}"
+        );
+        assert!(
+            along_z.abs() < 0.1 * slope,
+            "along the wall at {x}: {along_z}"
+        );
+    }
+}
