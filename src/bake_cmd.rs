@@ -557,7 +557,6 @@ fn report_json(
                 "radius": g.filter_radius,
                 "element_passes": g.element_passes,
                 "lights_at_hits": g.lights_at_hits,
-                "gradients": g.gradients,
                 "emitter_samples": g.emitter_samples,
             })),
             "write_seconds": w.write_s,

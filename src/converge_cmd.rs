@@ -526,7 +526,7 @@ fn lightmap_curve(
         atlas.width, atlas.height, atlas.pages
     );
     let mut csv = String::from(
-        "light_map,strata,stride,radius,element_passes,bake_s,lightmap_s,t_s,surfaces_mean_rel_error,surfaces_max_rel_error,points_median_rel_error,points_mean_rel_error,points_max_rel_error,lights_at_hits,gradients\n",
+        "light_map,strata,stride,radius,element_passes,bake_s,lightmap_s,t_s,surfaces_mean_rel_error,surfaces_max_rel_error,points_median_rel_error,points_mean_rel_error,points_max_rel_error,lights_at_hits\n",
     );
     let (mut by_surfaces, mut by_points, mut by_points_median) =
         (Vec::new(), Vec::new(), Vec::new());
@@ -567,7 +567,7 @@ fn lightmap_curve(
         let f = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6e}"));
         let _ = writeln!(
             csv,
-            "{name},{strata},{},{},{},{bake_s:.6},{lightmap_s:.6},{t_s:.6},{},{},{},{},{},{},{}",
+            "{name},{strata},{},{},{},{bake_s:.6},{lightmap_s:.6},{t_s:.6},{},{},{},{},{},{}",
             g.stride,
             g.filter_radius,
             g.element_passes,
@@ -580,11 +580,6 @@ fn lightmap_curve(
                 String::new()
             } else {
                 g.lights_at_hits.to_string()
-            },
-            if strata == 0 {
-                String::new()
-            } else {
-                g.gradients.to_string()
             },
         );
         let pct = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{:.2} %", v * 100.0));

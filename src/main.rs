@@ -251,11 +251,6 @@ pub(crate) struct GatherArgs {
     /// ray from the point met (the default; one more ray where a light faces the point).
     #[arg(long)]
     pub(crate) gather_lights_from_elements: bool,
-    /// With a final gather: a gathered texel stands for its neighbours by a flat copy within
-    /// half its rays' mean distance, instead of its value extrapolated along its irradiance
-    /// gradient and no farther than that gradient allows (the default).
-    #[arg(long)]
-    pub(crate) gather_flat: bool,
 }
 
 impl GatherArgs {
@@ -269,7 +264,6 @@ impl GatherArgs {
             filter_radius: self.gather_radius.max(self.gather_stride),
             element_passes: self.gather_passes,
             lights_at_hits: !self.gather_lights_from_elements,
-            gradients: !self.gather_flat,
             ..GatherParams::default()
         }
     }

@@ -479,7 +479,6 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
             "radius": g.filter_radius,
             "element_passes": g.element_passes,
             "lights_at_hits": g.lights_at_hits,
-            "gradients": g.gradients,
         })),
         "elements": bake.as_ref().map(|b| b.mesh.element_count()),
         "first_frame_ms": frame_ms,

@@ -1068,7 +1068,6 @@ fn bake_final_gather_is_reported_and_bad_settings_are_refused() {
     assert_eq!(gather["stride"], 1);
     assert_eq!(gather["radius"], 2);
     assert_eq!(gather["element_passes"], 0);
-    assert_eq!(gather["gradients"], true);
     // Off by default: the smooth field, no gather in the report.
     let plain = tmp("final-gather-off");
     run_ok(&["bake", "--builtin", "cornell-box"], &plain);

@@ -78,11 +78,6 @@ pub struct GatherParams {
     /// edge and interpolated across their neighbours): the sun's first bounce as sharp as the
     /// gather's rays. False: the solution's light as the field holds it.
     pub lights_at_hits: bool,
-    /// A gathered texel stands for its neighbours by its value extrapolated along its
-    /// translational gradient ([`Gathered::at`]), and no farther than its gradient allows
-    /// ([`Gathered::limited_reach`]): Ward and Heckbert's irradiance gradients. False: a flat
-    /// copy within its rays' harmonic mean distance.
-    pub gradients: bool,
 }
 
 impl Default for GatherParams {
@@ -96,7 +91,6 @@ impl Default for GatherParams {
             stride: 2,
             element_passes: 0,
             lights_at_hits: true,
-            gradients: true,
         }
     }
 }
@@ -329,23 +323,12 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
     /// distances (infinite when none hits; the mesh's frame): how far the value holds (Ward's
     /// irradiance caching), small where geometry is near, as at a contact.
     pub fn reflected(&self, x: DVec3, n: DVec3, key: u64) -> (Rgb, f64) {
-        let g = self.reflected_with_gradient(x, n, key);
-        (g.h, g.reach)
-    }
-
-    /// [`Self::reflected`] with the translational gradient of its value along the surface
-    /// (Ward & Heckbert 1992, "Irradiance gradients", from the same stratified rays): how
-    /// the value changes a short way off `x`, so that a gathered point can stand for its
-    /// neighbours by extrapolation instead of a flat copy.
-    pub fn reflected_with_gradient(&self, x: DVec3, n: DVec3, key: u64) -> Gathered {
         let mut rng = Rng::new(hash(self.params.seed, key, 0x6761_7468));
         let (t, b) = basis(n);
         // Rays start a little above the surface, as the bake's own rays do.
         let origin = x + n * 1e-5;
         let s = self.params.strata.max(1);
         let (mut sum, mut inverse) = ([0.0; 3], 0.0);
-        // Per stratum (`i % s` across sin²θ, `i / s` around φ): what the ray met and how far.
-        let mut met = Vec::with_capacity((s * s) as usize);
         for i in 0..s * s {
             let (a, c) = (
                 (f64::from(i % s) + rng.f64()) / f64::from(s),
@@ -359,14 +342,9 @@ impl<'a, V: Visibility> FinalGather<'a, V> {
                 sum[k] += l[k];
             }
             inverse += 1.0 / t.max(1e-9);
-            met.push((l, t.max(1e-9)));
         }
         let rays = f64::from(s * s);
-        Gathered {
-            h: sum.map(|v| v / rays),
-            reach: rays / inverse,
-            gradient: translational_gradient(&met, s as usize, (t, b)),
-        }
+        (sum.map(|v| v / rays), rays / inverse)
     }
 
     /// The reflected radiance (and the sky's) a ray from `origin` along unit `d` meets.
@@ -593,85 +571,6 @@ pub fn regather_elements<V: Visibility>(
             .collect();
     }
     b
-}
-
-/// What a gather at a point found ([`FinalGather::reflected_with_gradient`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Gathered {
-    /// `H` of the reflected light and the sky's.
-    pub h: Rgb,
-    /// The harmonic mean of the rays' hit distances (the mesh's frame).
-    pub reach: f64,
-    /// Per channel, the translational gradient of `h` in the surface's plane (per unit length
-    /// of the mesh's frame).
-    pub gradient: [DVec3; 3],
-}
-
-impl Gathered {
-    /// How far (the mesh's frame) this value stands for its neighbours: the rays' harmonic
-    /// mean distance, but no farther than where the gradient would change the value by all
-    /// of itself (Ward's gradient limit; Křivánek et al. 2008): where half the rays leave
-    /// an open side, the mean distance overstates how far the light holds.
-    pub fn limited_reach(&self) -> f64 {
-        let h: f64 = self.h.iter().sum();
-        let slope = (self.gradient[0] + self.gradient[1] + self.gradient[2]).length();
-        if slope > 0.0 && h.is_finite() && slope.is_finite() {
-            self.reach.min(h.max(0.0) / slope)
-        } else {
-            self.reach
-        }
-    }
-
-    /// The value extrapolated by `offset` (the mesh's frame) along the surface, at least 0.
-    pub fn at(&self, offset: DVec3) -> Rgb {
-        std::array::from_fn(|c| {
-            let v = self.h[c] + self.gradient[c].dot(offset);
-            if v.is_finite() { v.max(0.0) } else { self.h[c] }
-        })
-    }
-}
-
-/// The translational gradient of `H = 1/π ∫ L cos θ dω` from stratified cosine-weighted rays
-/// (`met[j + k s]`: radiance and hit distance of the ray in stratum `j` across `sin²θ` and
-/// `k` around φ, `s × s` strata, φ measured from tangent `t` toward `b`). Ward and Heckbert's
-/// estimate (1992; in the corrected form of Křivánek et al. 2008, "Practical global
-/// illumination with irradiance caching"): across each boundary between neighbouring strata,
-/// the change of radiance times how fast the boundary's solid angle moves as the point does,
-/// which goes as one over the nearer of the two hits' distances.
-fn translational_gradient(met: &[(Rgb, f64)], s: usize, (t, b): (DVec3, DVec3)) -> [DVec3; 3] {
-    use std::f64::consts::{PI, TAU};
-    let mut grad = [DVec3::ZERO; 3];
-    if s == 0 || met.len() != s * s {
-        return grad;
-    }
-    let m = s as f64;
-    let at = |j: usize, k: usize| met[j + k * s];
-    for k in 0..s {
-        // Across θ's boundaries: toward φ's centre of the stratum.
-        let phi = TAU * (k as f64 + 0.5) / m;
-        let u = t * phi.cos() + b * phi.sin();
-        // Across φ's boundary with the stratum before: perpendicular to it.
-        let phi_lo = TAU * k as f64 / m;
-        let v = b * phi_lo.cos() - t * phi_lo.sin();
-        let before = (k + s - 1) % s;
-        for j in 0..s {
-            let (l, r) = at(j, k);
-            let (sin_lo, sin_hi) = ((j as f64 / m).sqrt(), ((j + 1) as f64 / m).sqrt());
-            if j > 0 {
-                let (l0, r0) = at(j - 1, k);
-                let w = TAU / m * sin_lo * (1.0 - j as f64 / m) / r.min(r0);
-                for c in 0..3 {
-                    grad[c] += u * (w * (l[c] - l0[c]));
-                }
-            }
-            let (l1, r1) = at(j, before);
-            let w = (sin_hi - sin_lo) / r.min(r1);
-            for c in 0..3 {
-                grad[c] += v * (w * (l[c] - l1[c]));
-            }
-        }
-    }
-    grad.map(|g| g / PI)
 }
 
 /// Two unit tangents completing unit `n` to an orthonormal basis (Duff et al. 2017).

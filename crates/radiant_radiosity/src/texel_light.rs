@@ -316,18 +316,6 @@ pub fn compose_gathered_with_progress(
     } else {
         gather
     };
-    // A texel's gather as the lattices keep it: the rays' part and how far it holds (limited
-    // by its gradient with `params.gradients`), and the gradient.
-    let gathered = |p: DVec3, n: DVec3, key: u64| -> ([f32; 4], Option<[[f32; 3]; 3]>) {
-        if params.gradients {
-            let g = gather.reflected_with_gradient(p, n, key);
-            let v = [g.h[0], g.h[1], g.h[2], g.limited_reach()].map(|c| c as f32);
-            (v, Some(g.gradient.map(|d| d.as_vec3().to_array())))
-        } else {
-            let (g, reach) = gather.reflected(p, n, key);
-            ([g[0], g[1], g[2], reach].map(|c| c as f32), None)
-        }
-    };
     let (width, height) = (atlas.width.max(1) as usize, atlas.height as usize);
     let size = width * height;
     let mut texels = vec![[0.0f32; 3]; size * atlas.pages as usize];
@@ -373,18 +361,13 @@ pub fn compose_gathered_with_progress(
         let mut rays = vec![[f32::NAN; 4]; size];
         let mut at = vec![[f32::NAN; 2]; size];
         let mut buried = vec![false; size];
-        // The gathered texels' gradients (with `params.gradients`): `slot[k]` indexes
-        // `gradients` (u32::MAX: none).
-        let mut slot = vec![u32::MAX; if params.gradients { size } else { 0 }];
-        let mut gradients: Vec<[[f32; 3]; 3]> = Vec::new();
-        let coarse: Vec<Vec<(usize, [[f32; 3]; 3])>> = texels
+        texels
             .par_chunks_mut(width)
             .zip(rays.par_chunks_mut(width))
             .zip(at.par_chunks_mut(width))
             .zip(buried.par_chunks_mut(width))
             .enumerate()
-            .map(|(y, (((trow, rrow), arow), brow))| {
-                let mut sloped = Vec::new();
+            .for_each(|(y, (((trow, rrow), arow), brow))| {
                 for x in 0..trow.len() {
                     let k = y * width + x;
                     let o = owners[k];
@@ -407,21 +390,12 @@ pub fn compose_gathered_with_progress(
                     let emitted = gather.emitted(p, n, key);
                     trow[x] = std::array::from_fn(|c| (s.direct[c] + emitted[c]) as f32);
                     if x % coarsest == 0 && y % coarsest == 0 {
-                        let (v, gradient) = gathered(p, n, key);
-                        rrow[x] = v;
-                        if let Some(g) = gradient {
-                            sloped.push((y * width + x, g));
-                        }
+                        let (g, reach) = gather.reflected(p, n, key);
+                        rrow[x] = [g[0] as f32, g[1] as f32, g[2] as f32, reach as f32];
                     }
                 }
                 tick();
-                sloped
-            })
-            .collect();
-        for (k, g) in coarse.into_iter().flatten() {
-            slot[k] = gradients.len() as u32;
-            gradients.push(g);
-        }
+            });
         // Where a texel lies and faces, in the mesh's frame, and its surface.
         let place = |k: usize| -> Option<(DVec3, DVec3, u32)> {
             let o = owners[k];
@@ -434,17 +408,16 @@ pub fn compose_gathered_with_progress(
         // not one packed beside it.
         let reach = (r as f64 + 1.0) * std::f64::consts::SQRT_2 / atlas.density / mesh.frame.scale;
         // How far gathered texel `j` lies from texel `k` (at `here`) in shares of its rays'
-        // reach, and the offset from it, where it is on the same surface and plane within the
-        // window's reach.
+        // reach, where it is on the same surface and plane within the window's reach.
         let share = |rays: &[[f32; 4]], j: usize, k: usize, here: (DVec3, DVec3, u32)| {
             if j == k {
-                return Some((0.0, DVec3::ZERO));
+                return Some(0.0);
             }
             let (pk, nk, sk) = here;
             place(j).and_then(|(pj, nj, sj)| {
                 let d = pj.distance(pk);
                 (sj == sk && d <= reach && nj.dot(nk) >= crate::smooth::SAME_PLANE)
-                    .then(|| (d / f64::from(rays[j][3]).max(1e-12), pk - pj))
+                    .then(|| d / f64::from(rays[j][3]).max(1e-12))
             })
         };
         // The texels of stride `s`'s lattice within `r` of `c` along an axis of `len` texels:
@@ -467,8 +440,7 @@ pub fn compose_gathered_with_progress(
         // or a small chart goes down to the finest (every second texel).
         for pair in strides.windows(2) {
             let (prev, s) = (pair[0], pair[1]);
-            #[allow(clippy::type_complexity)]
-            let fresh: Vec<Vec<(usize, [f32; 4], Option<[[f32; 3]; 3]>)>> = (0..height)
+            let fresh: Vec<Vec<(usize, [f32; 4])>> = (0..height)
                 .into_par_iter()
                 .map(|y| {
                     let mut out = Vec::new();
@@ -486,7 +458,7 @@ pub fn compose_gathered_with_progress(
                                 window(x, prev, width).any(|nx| {
                                     let j = ny as usize * width + nx as usize;
                                     !rays[j][0].is_nan()
-                                        && share(&rays, j, k, here).is_some_and(|q| q.0 <= VALID)
+                                        && share(&rays, j, k, here).is_some_and(|q| q <= VALID)
                                 })
                             });
                             if stood_for {
@@ -495,29 +467,20 @@ pub fn compose_gathered_with_progress(
                             let Some((p, n, key)) = point(k, (at[k][0], at[k][1])) else {
                                 continue;
                             };
-                            let (v, gradient) = gathered(p, n, key);
-                            out.push((k, v, gradient));
+                            let (g, reach) = gather.reflected(p, n, key);
+                            out.push((k, [g[0] as f32, g[1] as f32, g[2] as f32, reach as f32]));
                         }
                     }
                     tick();
                     out
                 })
                 .collect();
-            let mut count = 0usize;
-            for (k, v, gradient) in fresh.into_iter().flatten() {
+            let mut gathered = 0usize;
+            for (k, v) in fresh.into_iter().flatten() {
                 rays[k] = v;
-                if let Some(g) = gradient {
-                    slot[k] = gradients.len() as u32;
-                    gradients.push(g);
-                }
-                count += 1;
+                gathered += 1;
             }
-            tracing::debug!(
-                page,
-                stride = s,
-                gathered = count,
-                "final gather: a finer lattice"
-            );
+            tracing::debug!(page, stride = s, gathered, "final gather: a finer lattice");
         }
         // Pass 2: each open texel adds the mean of the rays' parts gathered on its surface
         // within the window that stand for it; with none that does, the one nearest to it (in
@@ -542,18 +505,12 @@ pub fn compose_gathered_with_progress(
                             if rays[j][0].is_nan() {
                                 continue;
                             }
-                            let Some((q, offset)) = share(&rays, j, k, here) else {
+                            let Some(q) = share(&rays, j, k, here) else {
                                 continue;
                             };
                             if q <= VALID {
-                                // Extrapolated along its gradient, where it has one.
-                                let g = slot.get(j).and_then(|&i| gradients.get(i as usize));
                                 for c in 0..3 {
-                                    let flat = f64::from(rays[j][c]);
-                                    sum[c] += g.map_or(flat, |g| {
-                                        let v = flat + DVec3::from(g[c].map(f64::from)).dot(offset);
-                                        if v.is_finite() { v.max(0.0) } else { flat }
-                                    });
+                                    sum[c] += f64::from(rays[j][c]);
                                 }
                                 count += 1.0;
                             } else if nearest.is_none_or(|(best, _)| q < best) {
