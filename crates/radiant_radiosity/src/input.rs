@@ -756,13 +756,8 @@ mod tests {
             visibility(&mesh, None),
             scene_visibility(&scene, None).expect("rays"),
         );
-        let mut s = 0x2545_F491_4F6C_DD1Du64;
-        let mut next = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 40) as f32 / (1u64 << 24) as f32 - 0.5
-        };
+        let mut rng = crate::rng::Rng::new(7);
+        let mut next = || rng.f64() as f32 - 0.5;
         let mut hits = 0;
         for _ in 0..4000 {
             let o = Vec3::new(next(), next(), next()) * 0.9;
