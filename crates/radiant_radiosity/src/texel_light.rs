@@ -14,8 +14,7 @@
 //! triangle clamped onto it). A point of it is buried when the first face a ray along its
 //! normal meets is the back of a single-sided one (a box on a floor, a wall's foot, a column
 //! on its plinth). Short segments just above the surface, from the footprint's centre to its
-//! 2 × 2 quarter centres (two through the centre between opposite quarters, where none is
-//! clamped onto the triangle), say whether other geometry splits it; when none does, one such ray
+//! 2 × 2 quarter centres, say whether other geometry splits it; when none does, one such ray
 //! at the centre says whether all of it is open or buried. All open (the usual case), each
 //! light is sampled at the four quarter centres, and where they disagree (lit and shadowed) on
 //! the 4 × 4 grid, so an edge crossing the texel gives it its share in sixteenths; the rest of
@@ -182,18 +181,9 @@ impl<V: Visibility> TexelLights<V> {
         // blocked, one probe at the centre says whether all of it is in the open or buried.
         let centre_point = point((u0, v0));
         let above = |x: DVec3| (x + *n * 1e-5).as_vec3();
-        let q = [0, 1, 2, 3].map(|i| point(coarse[i]));
-        // Where no quarter centre is clamped onto the triangle, the centre is the midpoint of
-        // each pair of opposite quarters, and two segments through it ask what the four from it
-        // would, at half the rays (they are a quarter of the light map's time on Sponza).
-        let through = |a: usize, b: usize| ((q[a] + q[b]) * 0.5).distance(centre_point) <= 1e-12;
-        let split = if through(0, 3) && through(1, 2) {
-            !self.vis.segment_clear(above(q[0]), above(q[3]))
-                || !self.vis.segment_clear(above(q[1]), above(q[2]))
-        } else {
-            q.iter()
-                .any(|&x| !self.vis.segment_clear(above(centre_point), above(x)))
-        };
+        let split = coarse
+            .iter()
+            .any(|&w| !self.vis.segment_clear(above(centre_point), above(point(w))));
         // All of the footprint in the open (the usual case): read the light at the texel's
         // centre; otherwise at the centroid of the fine grid's open points, and the lights over
         // those alone.
