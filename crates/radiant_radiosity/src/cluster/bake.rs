@@ -525,6 +525,17 @@ impl ClusterBake {
         Arc::clone(&self.mesh)
     }
 
+    /// The cluster tree above the mesh's input triangles.
+    pub fn tree(&self) -> &Tree {
+        &self.tree
+    }
+
+    /// Per element: its reflectance and its source term (emission and the lights' direct
+    /// light, times the reflectance), as the solve takes them.
+    pub fn terms(&self) -> (Vec<Rgb>, Vec<Rgb>) {
+        self.lighting.terms(&self.surfaces, &self.mesh)
+    }
+
     /// The scene's surfaces as the bake has them.
     pub fn surfaces(&self) -> &[Surface] {
         &self.surfaces
