@@ -73,6 +73,7 @@ pub(crate) fn bake_clustered(
     let cp = ClusterParams {
         memory_limit: h.memory_limit,
         samples: h.link_samples,
+        transfer: !h.push_by_normal,
         // A one-shot bake: no geometry edits follow, so the refinement's record is not kept.
         edits: false,
         ..ClusterParams::default()

@@ -512,6 +512,7 @@ fn lightmap_curve(
         hierarchy: args.hierarchy,
         memory_limit: args.memory_limit,
         link_samples: ClusterParams::default().samples,
+        push_by_normal: false,
     };
     let t = Instant::now();
     let result = if crate::baking::use_clustered(args.hierarchy, scene, &params)? {

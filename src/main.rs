@@ -290,6 +290,11 @@ pub(crate) struct HierarchyArgs {
     /// Visibility samples per link of a clustered bake.
     #[arg(long, default_value_t = ClusterParams::default().samples)]
     pub(crate) link_samples: u32,
+    /// A clustered bake's cluster receivers hand their light to the elements under them by
+    /// the elements' normals alone, not by each one's own visibility (16 short probe rays an
+    /// element saved; a nook inside a large cluster then takes its open neighbours' light).
+    #[arg(long)]
+    pub(crate) push_by_normal: bool,
 }
 
 /// `radiant converge`.

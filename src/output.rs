@@ -166,6 +166,7 @@ pub fn report_json(
             "memory_counted_bytes": c.memory_estimate,
             "enclosed_elements": c.enclosed,
             "partly_enclosed_elements": c.partly_enclosed,
+            "push": if c.transfer { "transfer" } else { "normal" },
         }),
         None => json!({ "kind": "triangles" }),
     };

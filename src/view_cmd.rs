@@ -108,6 +108,7 @@ pub(crate) fn run(args: &ViewArgs) -> anyhow::Result<()> {
         cluster: radiant::radiosity::cluster::ClusterParams {
             memory_limit: h.memory_limit,
             samples: h.link_samples,
+            transfer: !h.push_by_normal,
             ..Default::default()
         },
         ..Default::default()

@@ -567,6 +567,7 @@ fn clustered_bake_reports_its_hierarchy_and_memory_limit_refuses() {
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).expect("report"))
             .expect("json");
     assert_eq!(report["hierarchy"]["kind"], "clustered");
+    assert_eq!(report["hierarchy"]["push"], "transfer");
     assert!(
         report["hierarchy"]["memory_counted_bytes"]
             .as_u64()
@@ -574,6 +575,31 @@ fn clustered_bake_reports_its_hierarchy_and_memory_limit_refuses() {
             > 0
     );
     assert!(out.join("surfaces.csv").is_file());
+    let surfaces = std::fs::read_to_string(out.join("surfaces.csv")).expect("surfaces");
+
+    // The old push, by the elements' normals alone: other light, reported.
+    let normal = tmp("clustered_normal");
+    let st = radiant()
+        .args([
+            "bake",
+            "--builtin",
+            "cornell-box",
+            "--hierarchy",
+            "clustered",
+        ])
+        .args(["--patch-size", "0.3", "--push-by-normal", "--out"])
+        .arg(&normal)
+        .output()
+        .expect("runs");
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let read = |f: &str| std::fs::read_to_string(normal.join(f)).expect("output");
+    let r: serde_json::Value = serde_json::from_str(&read("report.json")).expect("json");
+    assert_eq!(r["hierarchy"]["push"], "normal");
+    assert_ne!(read("surfaces.csv"), surfaces);
 
     // A budget far below the mesh: one line naming the limit, a non-zero exit, in no time.
     let st = radiant()

@@ -219,6 +219,11 @@ fn reserve_buffers(mesh: &Mesh, budget: &mut Budget) -> Result<(), BakeError> {
         mesh.roots.len() as u64 * (3 * 72 + 2 * 216),
     )?;
     budget.reserve("the ray-tracing BVH", mesh.roots.len() as u64 * 160)?;
+    // Per element its transfer and cluster, per cluster their mean (`transfer`).
+    budget.reserve(
+        "the elements' transfers",
+        n * 40 + mesh.roots.len() as u64 * 72,
+    )?;
     // Kept for edits: direct light and the textures' footprints.
     budget.reserve("the lighting kept for edits", n * 24 * 3)
 }
@@ -365,6 +370,15 @@ impl ClusterBake {
                 (sys, params.links.refinement, None, None)
             }
         };
+        let mut sys = sys;
+        if has_emitters && cp.transfer {
+            sys.set_transfer(super::transfer::transfer(
+                &mesh,
+                &tree,
+                &bvh,
+                params.ff.seed,
+            ));
+        }
         times.form_factors = lap();
         tracing::info!(
             links = sys.links(),
@@ -784,6 +798,19 @@ impl ClusterBake {
                 clear.then(|| old_of(leaf)).flatten()
             },
         );
+        // The same for the elements' transfers: kept where the element stayed, under the same
+        // sphere, and none of its rays may meet what moved.
+        let transfer = self.cp.transfer.then(|| {
+            let old = self.sys.transfers();
+            let seed = self.params.ff.seed;
+            super::transfer::transfer_keeping(&mesh, &tree, &bvh, seed, &|leaf, probes| {
+                let o = *matched.old_of_new_leaf.get(leaf)?;
+                let t = *old?.get(o as usize)?;
+                let before = super::transfer::probes(&self.mesh, &self.tree, o as usize, seed);
+                let clear = (probes.rays.iter()).all(|&(x, d)| !moved.ray_meets(x, d));
+                (before.sphere == probes.sphere && clear).then_some(t)
+            })
+        });
         let oracle = Oracle::new(&mesh, &tree, &rho, &source);
         phases.direct_light = lap();
         let before = self.record.as_ref().map(|record| {
@@ -852,7 +879,10 @@ impl ClusterBake {
         drop(walk);
         phases.assembly = lap();
         let terms = (rho, source, live);
-        let sys = HierSystem::new_in(&mesh, &tree, &record.links, terms, Some(&mut self.sys))?;
+        let mut sys = HierSystem::new_in(&mesh, &tree, &record.links, terms, Some(&mut self.sys))?;
+        if let Some(t) = transfer {
+            sys.set_transfer(t);
+        }
         phases.rows = lap();
         // The current light, carried to the elements that stayed; the others start from their
         // sources.
@@ -1032,6 +1062,7 @@ impl ClusterBake {
                 partly_enclosed: (self.sys.exposure().iter())
                     .filter(|&&l| l > 0 && usize::from(l) < crate::exposure::POINTS)
                     .count(),
+                transfer: self.sys.transfers().is_some(),
             }),
         }
     }

@@ -37,6 +37,7 @@ pub mod record;
 pub mod refine;
 pub mod sh;
 pub mod solve;
+pub mod transfer;
 pub mod tree;
 
 pub use bake::{ClusterBake, EditPhases, GeometryEdit};
@@ -73,6 +74,10 @@ pub struct ClusterParams {
     /// ([`ClusterBake::edit_geometry`]) refines only what it touches; about a byte per pair
     /// visited and 12 per link. Off, an edit refines everything again (default: true).
     pub edits: bool,
+    /// Each element takes its clusters' light by its own visibility ([`transfer`]: a nook
+    /// inside a large cluster no longer takes the light its open neighbours see); off, by its
+    /// normal alone. Sixteen short probe rays per element (default: true).
+    pub transfer: bool,
 }
 
 impl Default for ClusterParams {
@@ -83,6 +88,7 @@ impl Default for ClusterParams {
             samples: 4,
             max_sweeps: 10_000,
             edits: true,
+            transfer: true,
         }
     }
 }
@@ -115,6 +121,9 @@ pub struct ClusterReport {
     /// Elements enclosed in part: some of their probe points exposed, some not
     /// ([`crate::exposure`]).
     pub partly_enclosed: usize,
+    /// Whether the elements took their clusters' light by their own visibility
+    /// ([`transfer`]), not by their normals alone.
+    pub transfer: bool,
 }
 
 /// The memory budget: bytes handed out against a limit.

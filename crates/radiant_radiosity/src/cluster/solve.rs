@@ -72,6 +72,21 @@ pub struct HierSystem {
     /// Per cluster: harmonics of its normals by exposed area ([`HierSystem::weight`]); the
     /// tree's where nothing below it is enclosed. See [`HierSystem::live_harmonics`].
     live_sh: Vec<[f64; 9]>,
+    /// How the elements take their clusters' light by their own visibility
+    /// ([`super::transfer`]); `None`: by their normals alone.
+    transfer: Option<Transfer>,
+}
+
+/// [`HierSystem::set_transfer`]'s harmonics.
+#[derive(Clone, Debug)]
+struct Transfer {
+    /// Per element, `max(0, n·ω) V(ω)` as harmonics.
+    element: Vec<[f32; 9]>,
+    /// Per element, the cluster above its input triangle (`u32::MAX`: none).
+    cluster: Vec<u32>,
+    /// Per cluster, its live elements' transfers by live area: the mean share its light is
+    /// divided by, towards a direction.
+    mean: Vec<[f64; 9]>,
 }
 
 /// The buffers a sweep works in ([`HierSystem::sweep_in`]): per node its pulled radiosity and
@@ -337,6 +352,7 @@ impl HierSystem {
             normal: mesh.nodes.iter().map(|n| n.normal).collect(),
             normal_sh: tree.normal_sh.clone(),
             live_sh: Vec::new(),
+            transfer: None,
         };
         let mut w = vec![0.0; nodes];
         let mut full = vec![0.0; nodes];
@@ -365,6 +381,64 @@ impl HierSystem {
         sys.weight = w;
         sys.live_sh = sys.live_harmonics();
         sys
+    }
+
+    /// Per element, the transfers [`HierSystem::set_transfer`] set.
+    pub(crate) fn transfers(&self) -> Option<&[[f32; 9]]> {
+        self.transfer.as_ref().map(|t| &t.element[..])
+    }
+
+    /// Hands each cluster's light to the elements under it by their own visibility
+    /// ([`super::transfer`]), `element` per element, instead of by their normals alone.
+    pub fn set_transfer(&mut self, element: Vec<[f32; 9]>) {
+        let m = self.mesh_nodes as usize;
+        let clusters = self.row.len() - 1 - m;
+        let mut sum = vec![[0.0f64; 9]; clusters];
+        let mut weight = vec![0.0f64; clusters];
+        let cluster: Vec<u32> = (self.leaf_node.iter())
+            .map(|&n| {
+                let mut id = n;
+                while (id as usize) < m {
+                    id = self.parent[id as usize];
+                    if id == u32::MAX {
+                        return u32::MAX;
+                    }
+                }
+                id
+            })
+            .collect();
+        for (i, &c) in cluster.iter().enumerate() {
+            let w = self.weight[self.leaf_node[i] as usize];
+            if c == u32::MAX || w <= 0.0 {
+                continue;
+            }
+            let c = c as usize - m;
+            for j in 0..9 {
+                sum[c][j] += w * f64::from(element[i][j]);
+            }
+            weight[c] += w;
+        }
+        // Children after parents: backwards, each into its parent.
+        for c in (0..clusters).rev() {
+            let p = self.parent[m + c];
+            if p != u32::MAX {
+                let (p, s, w) = (p as usize - m, sum[c], weight[c]);
+                for j in 0..9 {
+                    sum[p][j] += s[j];
+                }
+                weight[p] += w;
+            }
+        }
+        let mean = sum
+            .iter()
+            .zip(&weight)
+            .map(|(s, &w)| if w > 0.0 { s.map(|v| v / w) } else { [0.0; 9] })
+            .collect();
+        self.transfer = Some(Transfer {
+            element,
+            cluster,
+            mean,
+        });
     }
 
     /// Per cluster, the harmonics of its normals weighted by exposed area. A cluster shines
@@ -411,9 +485,15 @@ impl HierSystem {
     /// Sponza's solve diverged. So for elements enclosed in part, the gather of uniform unit
     /// radiosity (the sum of form factors the element takes, pushes and directions included)
     /// is measured once, and the element's gather scaled to at most [`GATHER_AT_MOST`].
+    ///
+    /// With transfers ([`HierSystem::set_transfer`]) every live element is measured so: a
+    /// cluster whose elements nearly all face away from a source divides its light by a small
+    /// mean, and an element's noise above it would take more than the cluster gathered.
     fn caps(&self, scratch: &mut SweepScratch) -> Vec<f64> {
         let elements = self.area.len();
-        let partial = |i: usize| self.live[i] > 0 && usize::from(self.live[i]) < exposure::POINTS;
+        let all = self.transfer.is_some();
+        let partial =
+            |i: usize| self.live[i] > 0 && (all || usize::from(self.live[i]) < exposure::POINTS);
         let mut cap = vec![1.0; elements];
         if !(0..elements).any(partial) {
             return cap;
@@ -650,7 +730,11 @@ impl HierSystem {
                     let mut f = f64::from(self.ff[k]);
                     let v = self.value(n, s, nb, p);
                     let d = (self.center[s] - self.center[n]).normalize_or_zero();
-                    if diluted {
+                    if let Some(t) = &self.transfer {
+                        // Shared by the live elements' transfers towards the source.
+                        let all = sh::dot(&self.normal_sh[n - m], &sh::cosine(d)).max(KAPPA_MIN);
+                        f *= all / sh::dot(&t.mean[n - m], &sh::basis(d)).max(KAPPA_MIN);
+                    } else if diluted {
                         let cy = sh::cosine(d);
                         let all = sh::dot(&self.normal_sh[n - m], &cy).max(KAPPA_MIN);
                         f *= all / sh::dot(&self.live_sh[n - m], &cy).max(KAPPA_MIN);
@@ -708,6 +792,10 @@ impl HierSystem {
                 continue;
             }
             let up = if parent as usize >= m {
+                if self.transfer.is_some() {
+                    // Each element takes it by its own transfer, below.
+                    continue;
+                }
                 let cy = sh::cosine(self.normal[n]);
                 let s = &shr[parent as usize - m];
                 std::array::from_fn(|k| sh::dot(&s[k], &cy).max(0.0))
@@ -723,7 +811,16 @@ impl HierSystem {
                 if self.dead[i] {
                     return [0.0; 3];
                 }
-                let gi = g[self.leaf_node[i] as usize];
+                let mut gi = g[self.leaf_node[i] as usize];
+                if let Some(t) = &self.transfer
+                    && let Some(c) = (t.cluster[i] as usize).checked_sub(m)
+                    && c < shr.len()
+                {
+                    let y = t.element[i].map(f64::from);
+                    for k in 0..3 {
+                        gi[k] += sh::dot(&shr[c][k], &y).max(0.0);
+                    }
+                }
                 let cap = cap.get(i).copied().unwrap_or(1.0);
                 std::array::from_fn(|k| source[i][k] + rho[i][k] * (gi[k] * cap))
             })
