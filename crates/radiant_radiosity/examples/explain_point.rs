@@ -36,8 +36,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let path = args.first().ok_or(usage)?;
     let world = DVec3::new(num(1)?, num(2)?, num(3)?);
     let normal = DVec3::new(num(4)?, num(5)?, num(6)?).normalize_or_zero();
-    if normal == DVec3::ZERO {
-        return Err("the normal is zero".into());
+    if !world.is_finite() || normal == DVec3::ZERO {
+        return Err("the point must be finite and the normal finite and not zero".into());
     }
     let scene = radiant_scene::load_gltf(std::path::Path::new(path))?;
     let (params, cp) = (BakeParams::default(), ClusterParams::default());
@@ -108,22 +108,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut found = vec![0.0; links.len()];
     let (mut unlinked, mut unlinked_h, mut total) = (0u32, 0.0, 0.0);
     let mut rng = Rng::new(1);
-    let (t, bt) = tangents(normal);
     let origin = p + normal * 1e-5;
     for _ in 0..RAYS {
-        let (u, v) = (rng.f64(), rng.f64());
-        let (r, phi) = (u.sqrt(), std::f64::consts::TAU * v);
-        let d = t * (r * phi.cos()) + bt * (r * phi.sin()) + normal * (1.0 - u).sqrt();
+        let d = cosine_direction(normal, &mut rng);
         let Some(h) = bvh.closest_hit(origin.as_vec3(), d.as_vec3(), f32::INFINITY) else {
             continue;
         };
         if !h.front {
             continue;
         }
-        let at = element_at(mesh, h.triangle, origin + d * f64::from(h.t));
-        let value = b[mesh.nodes[at as usize].leaf_lo as usize][0] / f64::from(RAYS);
+        let at = mesh.locate(h.triangle, f64::from(h.u), f64::from(h.v));
+        let value = b[at as usize][0] / f64::from(RAYS);
         total += value;
-        match ancestors(mesh, tree, at)
+        match ancestors(mesh, tree, mesh.leaves[at as usize])
             .iter()
             .find_map(|a| by_source.get(a))
         {
@@ -141,18 +138,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // The same rays from the element's ninths: where it lies inside other geometry, most of
     // their rays meet back faces.
     for (k, q) in ninths(&node.v).into_iter().enumerate() {
-        let (t, bt) = tangents(node.normal);
         let o = q + node.normal * 1e-5;
         let (mut h_sum, mut back) = (0.0, 0u32);
         let n = RAYS / 10;
         for _ in 0..n {
-            let (u, v) = (rng.f64(), rng.f64());
-            let (r, phi) = (u.sqrt(), std::f64::consts::TAU * v);
-            let d = t * (r * phi.cos()) + bt * (r * phi.sin()) + node.normal * (1.0 - u).sqrt();
+            let d = cosine_direction(node.normal, &mut rng);
             match bvh.closest_hit(o.as_vec3(), d.as_vec3(), f32::INFINITY) {
                 Some(h) if h.front => {
-                    let at = element_at(mesh, h.triangle, o + d * f64::from(h.t));
-                    h_sum += b[mesh.nodes[at as usize].leaf_lo as usize][0];
+                    let at = mesh.locate(h.triangle, f64::from(h.u), f64::from(h.v));
+                    h_sum += b[at as usize][0];
                 }
                 Some(_) => back += 1,
                 None => {}
@@ -253,21 +247,6 @@ fn ancestors(mesh: &Mesh, tree: &radiant_radiosity::cluster::tree::Tree, id: u32
     }
 }
 
-/// The mesh node of input triangle `triangle`'s subtree nearest `q`, down to an element.
-fn element_at(mesh: &Mesh, triangle: u32, q: DVec3) -> u32 {
-    let mut id = mesh.roots[triangle as usize];
-    while !mesh.nodes[id as usize].is_leaf() {
-        let first = mesh.nodes[id as usize].first_child;
-        id = (first..first + 4)
-            .min_by(|&a, &c| {
-                let da = (mesh.nodes[a as usize].centroid - q).length_squared();
-                da.total_cmp(&(mesh.nodes[c as usize].centroid - q).length_squared())
-            })
-            .unwrap_or(first);
-    }
-    id
-}
-
 /// The red radiosity of node `id` averaged over its exposed area.
 fn source_mean(
     mesh: &Mesh,
@@ -312,9 +291,10 @@ fn ninths(v: &[DVec3; 3]) -> Vec<DVec3> {
     out
 }
 
-/// Two unit tangents of `n`.
-fn tangents(n: DVec3) -> (DVec3, DVec3) {
-    let t = if n.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
-    let t = (t - n * n.dot(t)).normalize();
-    (t, n.cross(t))
+/// A cosine-distributed direction about unit `n`.
+fn cosine_direction(n: DVec3, rng: &mut Rng) -> DVec3 {
+    let (t, b) = n.any_orthonormal_pair();
+    let (u, v) = (rng.f64(), rng.f64());
+    let (r, phi) = (u.sqrt(), std::f64::consts::TAU * v);
+    t * (r * phi.cos()) + b * (r * phi.sin()) + n * (1.0 - u).sqrt()
 }

@@ -390,7 +390,12 @@ impl HierSystem {
 
     /// Hands each cluster's light to the elements under it by their own visibility
     /// ([`super::transfer`]), `element` per element, instead of by their normals alone.
-    pub fn set_transfer(&mut self, element: Vec<[f32; 9]>) {
+    /// `element` holds one transfer per element ([`super::transfer::transfer`] of the same
+    /// mesh); a list of another length is ignored (the push stays by the normals).
+    pub(crate) fn set_transfer(&mut self, element: Vec<[f32; 9]>) {
+        if element.len() != self.leaf_node.len() {
+            return;
+        }
         let m = self.mesh_nodes as usize;
         let clusters = self.row.len() - 1 - m;
         let mut sum = vec![[0.0f64; 9]; clusters];
